@@ -1,0 +1,29 @@
+"""The physics core: discrete elastic rod fingers, force models and implicit time stepping.
+
+Pure NumPy/SciPy with Numba-compiled kernels; it never imports gymnasium, torch or stable-baselines3.
+"""
+
+from .config import (
+    ELASTOSIL_MA_4601,
+    SOFT_TRANSLUCENT_SILICONE,
+    WATER_VISCOSITY,
+    FingerDesign,
+    GripperDesign,
+    Material,
+    NewtonSettings,
+    Scene,
+    cantilever_scene,
+    linear_taper,
+    paper_finger,
+    paper_scene,
+)
+from .discretization import Discretization
+from .forces import Buoyancy, ForceModel, Gravity, MassProportionalDamping, StokesDrag
+from .simulator import RodState, Simulator, StepResult, Trajectory, run_ramp
+
+__all__ = [
+    "ELASTOSIL_MA_4601", "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "FingerDesign", "GripperDesign",
+    "Material", "NewtonSettings", "Scene", "cantilever_scene", "linear_taper", "paper_finger", "paper_scene",
+    "Discretization", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping", "StokesDrag", "RodState",
+    "Simulator", "StepResult", "Trajectory", "run_ramp",
+]

@@ -1,0 +1,118 @@
+"""External force models: each one adds its generalized force and its Jacobian to the implicit system.
+
+Every model implements :meth:`ForceModel.accumulate`. The simulator sums the models a scene lists, and nothing else:
+a scene without drag pays nothing for drag. Arrays follow the layout of :class:`~.discretization.Discretization`:
+
+=========================  ==========================================================  ========
+name                       meaning                                                     shape
+=========================  ==========================================================  ========
+``positions``              node positions, planar (s, z) or 3-D (x, y, z) [m]          (R, N, D)
+``velocities``             node velocities [m/s]                                       (R, N, D)
+``force``                  generalized force, accumulated into [N]                     (R, N, D)
+``system_band``            lower band of the Newton matrix, accumulated into [N/m]     (R, kd+1, n)
+=========================  ==========================================================  ========
+
+R counts rods (batch × fingers), N nodes, D = 2 (planar) or 3, n the DOFs per rod. A model adds its force f to
+``force`` and −(∂f/∂q + ∂f/∂v · ∂v/∂q) to ``system_band``; ``velocity_derivative`` = ∂v/∂q of the integrator
+(1/Δt for backward Euler), so models need not know which integrator runs them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .discretization import Discretization
+
+
+def _check_positive(owner: str, name: str, value: float, unit: str, allow_zero: bool = True) -> None:
+    from .config import check_range  # config imports this module; import late to avoid a cycle
+
+    check_range(owner, name, value, unit, 0.0, low_inclusive=allow_zero)
+
+
+class ForceModel:
+    """Interface of every external force. Subclasses are frozen dataclasses holding their parameters in SI units."""
+
+    def accumulate(self, disc: Discretization, positions: np.ndarray, velocities: np.ndarray, time: float,
+                   force: np.ndarray, system_band: np.ndarray, velocity_derivative: float) -> None:
+        """Add this model's force [N] to ``force`` and its negated Jacobian to ``system_band``."""
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class Gravity(ForceModel):
+    """Weight of every node, m_i·g along −z. Position-independent, so its Jacobian is zero."""
+
+    acceleration: float = 9.81
+    """Gravitational acceleration g [m/s²]."""
+
+    def __post_init__(self) -> None:
+        _check_positive("Gravity", "acceleration", self.acceleration, "m/s²")
+
+    def accumulate(self, disc, positions, velocities, time, force, system_band, velocity_derivative):
+        force[..., disc.vertical_axis] -= disc.node_mass * self.acceleration
+
+
+@dataclass(frozen=True)
+class Buoyancy(ForceModel):
+    """Archimedes' lift of every submerged node, ρ_fluid·V_i·g along +z (V_i the node's lumped volume)."""
+
+    fluid_density: float = 1000.0
+    """Density of the surrounding fluid ρ_fluid [kg/m³]; zero in the paper's scene."""
+    acceleration: float = 9.81
+    """Gravitational acceleration g [m/s²]; must match the scene's :class:`Gravity`."""
+
+    def __post_init__(self) -> None:
+        _check_positive("Buoyancy", "fluid_density", self.fluid_density, "kg/m³")
+        _check_positive("Buoyancy", "acceleration", self.acceleration, "m/s²")
+
+    def accumulate(self, disc, positions, velocities, time, force, system_band, velocity_derivative):
+        force[..., disc.vertical_axis] += disc.node_volume * (self.fluid_density * self.acceleration)
+
+
+@dataclass(frozen=True)
+class StokesDrag(ForceModel):
+    """The paper's per-node Stokes drag f_i = −6π·r_i·η·v_i (each node treated as a sphere of the rod's radius).
+
+    A low-Reynolds law, kept for reproducing the paper; at water's viscosity it is negligible (physics.md §3).
+    """
+
+    viscosity: float = 1.0e-3
+    """Dynamic viscosity η [Pa·s]."""
+
+    def __post_init__(self) -> None:
+        _check_positive("StokesDrag", "viscosity", self.viscosity, "Pa·s")
+
+    def accumulate(self, disc, positions, velocities, time, force, system_band, velocity_derivative):
+        coefficient = 6.0 * math.pi * self.viscosity * disc.node_radius  # [N·s/m], shape (N,)
+        _add_linear_damping(disc, coefficient, velocities, force, system_band, velocity_derivative)
+
+
+@dataclass(frozen=True)
+class MassProportionalDamping(ForceModel):
+    """Linear damping f_i = −γ·m_i·v_i on every node, a numerical damping used by benchmarks."""
+
+    rate: float = 10.0
+    """Damping rate γ [1/s]."""
+
+    def __post_init__(self) -> None:
+        _check_positive("MassProportionalDamping", "rate", self.rate, "1/s")
+
+    def accumulate(self, disc, positions, velocities, time, force, system_band, velocity_derivative):
+        _add_linear_damping(disc, self.rate * disc.node_mass, velocities, force, system_band, velocity_derivative)
+
+
+def _add_linear_damping(disc: Discretization, coefficient: np.ndarray, velocities: np.ndarray, force: np.ndarray,
+                        system_band: np.ndarray, velocity_derivative: float) -> None:
+    """f = −c_i·v_i per node, isotropic; Jacobian −c_i·∂v/∂q on the diagonal."""
+    force -= coefficient[:, None] * velocities
+    disc.add_to_position_diagonal(system_band, np.broadcast_to((coefficient * velocity_derivative)[:, None],
+                                                               velocities.shape[1:]))
+
+
+__all__ = ["ForceModel", "Gravity", "Buoyancy", "StokesDrag", "MassProportionalDamping"]

@@ -1,0 +1,267 @@
+"""Batched implicit time stepping of the gripper's fingers.
+
+Every state array carries a leading batch axis B (grippers) and a finger axis F. Internally the B·F rods are
+flattened to one rod axis R, and the per-rod work (elastic forces, Hessian, banded solve) runs in compiled kernels
+over all rods at once; the Newton loop itself is a few array operations per iteration, so its cost does not grow
+with B. Each rod stops iterating as soon as it has converged, so a rod's result never depends on which other rods
+share its batch.
+
+Backward Euler, on the free DOFs q (physics.md §1):
+
+    M·(q − q_old − Δt·v_old)/Δt² − f(q, (q − q_old)/Δt) = 0,
+
+solved by Newton's method started from the predictor q_old + Δt·v_old.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .config import Scene
+from .discretization import Discretization
+from .linalg import solve_banded_symmetric
+from .rod_3d import rod3d_elastic, rod3d_update_frames
+from .rod_planar import planar_elastic
+
+
+@dataclass(frozen=True, eq=False)
+class RodState:
+    """The state of B grippers at one instant.
+
+    ``q`` and ``velocity`` are (B, F, N, S) in the layout of :class:`~.discretization.Discretization`
+    ([m] and [m/s]; twist angles [rad] and [rad/s]). The 3-D model also carries the reference frame of every edge,
+    which is part of the state because it is transported in time: ``tangent`` and ``director`` (B, F, N − 1, 3),
+    ``reference_twist`` (B, F, N) [rad]. They are None in the planar model.
+    """
+
+    q: np.ndarray
+    velocity: np.ndarray
+    time: float
+    """Simulated time [s]."""
+    tangent: np.ndarray | None = None
+    director: np.ndarray | None = None
+    reference_twist: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class StepResult:
+    """What one implicit step returns. Per-gripper arrays have shape (B,)."""
+
+    state: RodState
+    converged: np.ndarray
+    """Whether Newton's method met its tolerance on every finger of the gripper."""
+    newton_iterations: np.ndarray
+    """Linear solves (Newton iterations) the slowest finger needed."""
+    residual: np.ndarray
+    """Final residual: the largest free-DOF residual divided by its tolerance (≤ 1 when converged; dimensionless)."""
+
+
+class Simulator:
+    """Steps a batch of identical grippers of one :class:`~.config.Scene` in time.
+
+    >>> sim = Simulator(paper_scene())
+    >>> state = sim.initial_state()
+    >>> result = sim.step(state, natural_curvature=-0.15 * state.time)
+    """
+
+    def __init__(self, scene: Scene, batch_size: int = 1) -> None:
+        if not isinstance(batch_size, (int, np.integer)) or not 1 <= batch_size <= 10_000_000:
+            raise ValueError(f"Simulator.batch_size = {batch_size!r} (count) is outside the allowed range "
+                             f"[1, 10000000]")
+        self.scene = scene
+        self.batch_size = int(batch_size)
+        self.disc = Discretization.from_scene(scene)
+
+    @property
+    def n_fingers(self) -> int:
+        return self.scene.gripper.n_fingers
+
+    @property
+    def n_rods(self) -> int:
+        return self.batch_size * self.n_fingers
+
+    def initial_state(self) -> RodState:
+        """All fingers straight and at rest at t = 0."""
+        disc = self.disc
+        q = np.broadcast_to(disc.rest_q, (self.batch_size,) + disc.rest_q.shape).copy()
+        state = RodState(q=q, velocity=np.zeros_like(q), time=0.0)
+        if disc.model == "3d":
+            n_edges = disc.n_nodes - 1
+            tangent = np.broadcast_to(disc.finger_directions[None, :, None, :],
+                                      (self.batch_size, self.n_fingers, n_edges, 3)).copy()
+            director = np.zeros_like(tangent)
+            director[..., 2] = 1.0  # m1 = +z, so κ1 < 0 bends toward −z
+            state = replace(state, tangent=tangent, director=director,
+                            reference_twist=np.zeros(q.shape[:3]))
+        return state
+
+    def world_positions(self, state: RodState) -> np.ndarray:
+        """Node positions in the world frame [m], (B, F, N, 3)."""
+        return self.disc.world_positions(state.q)
+
+    def _natural_curvature(self, natural_curvature) -> np.ndarray:
+        kbar = np.asarray(natural_curvature, dtype=float)
+        try:
+            kbar = np.broadcast_to(kbar, (self.batch_size, self.n_fingers))
+        except ValueError:
+            raise ValueError(f"natural_curvature has shape {kbar.shape}; expected a scalar, (F,) = "
+                             f"({self.n_fingers},) or (B, F) = ({self.batch_size}, {self.n_fingers})") from None
+        if not np.all(np.isfinite(kbar)):
+            raise ValueError("natural_curvature (dimensionless) must be finite")
+        return np.ascontiguousarray(kbar).reshape(-1)
+
+    def step(self, state: RodState, natural_curvature) -> StepResult:
+        """Advance ``state`` by one time step Δt with natural curvature κ̄ (dimensionless) per gripper and finger.
+
+        ``natural_curvature`` is a scalar, (F,) or (B, F). It is held constant over the step.
+        """
+        return self._advance(state, self._natural_curvature(natural_curvature), self.scene.time_step,
+                             state.velocity)
+
+    def equilibrium(self, state: RodState, natural_curvature, max_steps: int = 200) -> StepResult:
+        """The static equilibrium reached from ``state`` with κ̄ held fixed, by pseudo-transient continuation.
+
+        Implicit steps from rest, each with a step twice as long as the last, until the inertial term itself is
+        below the Newton tolerance, which makes the result an equilibrium of the static forces alone. The returned
+        state is at rest at the same time as ``state``.
+        """
+        kbar = self._natural_curvature(natural_curvature)
+        pseudo_step = self.scene.time_step
+        zero = np.zeros_like(state.velocity)
+        result = None
+        for _ in range(max_steps):
+            result = self._advance(state, kbar, pseudo_step, zero)
+            if not np.all(result.converged):
+                pseudo_step *= 0.25
+                continue
+            state = replace(result.state, velocity=zero, time=state.time)
+            static = self.static_residual(state, kbar)
+            if np.all(static <= 1.0):
+                return replace(result, state=state, residual=static)
+            pseudo_step = min(2.0 * pseudo_step, 1.0e6)
+        assert result is not None
+        return replace(result, converged=np.zeros_like(result.converged))
+
+    def static_residual(self, state: RodState, natural_curvature) -> np.ndarray:
+        """Largest free-DOF force imbalance at rest divided by its Newton tolerance, per gripper (B,)."""
+        R, N, S = self.n_rods, self.disc.n_nodes, self.disc.stride
+        q = state.q.reshape(R, N, S)
+        force, _ = self._assemble(q, q, self._frames(state), self._natural_curvature(natural_curvature),
+                                  state.time, 1.0, hessian=False)
+        ratio = np.max(np.abs(force.reshape(R, -1)) * self._tolerance_inverse, axis=1)
+        return ratio.reshape(self.batch_size, self.n_fingers).max(axis=1)
+
+    @property
+    def _tolerance_inverse(self) -> np.ndarray:
+        return np.where(self.disc.free, 1.0 / self.disc.residual_scale, 0.0)
+
+    def _frames(self, state: RodState):
+        if self.disc.model != "3d":
+            return None
+        R, N = self.n_rods, self.disc.n_nodes
+        return (state.tangent.reshape(R, N - 1, 3), state.director.reshape(R, N - 1, 3),
+                state.reference_twist.reshape(R, N))
+
+    def _assemble(self, q, q_old, frames_old, kbar, time, velocity_derivative, hessian=True):
+        """Total force [N] on every DOF (R, N, S) and the lower band of −∂f/∂q (R, kd+1, n) at coordinates q."""
+        disc = self.disc
+        R, N, S, D = q.shape[0], disc.n_nodes, disc.stride, disc.dim
+        force = np.zeros((R, N, S))
+        band = np.zeros((R, disc.band_width + 1, N * S))
+        if frames_old is None:
+            planar_elastic(q, disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness,
+                           disc.voronoi_length, kbar, force, band, hessian)
+        else:
+            rod3d_elastic(q, *frames_old, disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness,
+                          disc.twist_stiffness, disc.voronoi_length, kbar, force, band, hessian)
+        velocity = (q - q_old) * velocity_derivative
+        for model in self.scene.forces:
+            model.accumulate(disc, q[..., :D], velocity[..., :D], time, force[..., :D], band, velocity_derivative)
+        return force, band
+
+    def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
+        disc = self.disc
+        scene = self.scene
+        R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
+        n = N * S
+        q_old = state.q.reshape(R, N, S)
+        q_pred = q_old + dt * velocity_old.reshape(R, N, S)
+        q = q_pred.copy()
+        frames_old = self._frames(state)
+        mass_term = disc.dof_mass / dt**2
+        velocity_derivative = 1.0 / dt
+        tolerance_inverse = self._tolerance_inverse
+        active = np.ones(R, dtype=bool)
+        converged = np.zeros(R, dtype=bool)
+        iterations = np.zeros(R, dtype=np.int64)
+        ratio = np.full(R, np.inf)
+        max_iterations = scene.newton.max_iterations
+        for it in range(max_iterations + 1):
+            force, band = self._assemble(q, q_old, frames_old, kbar, state.time, velocity_derivative)
+            residual = mass_term * (q - q_pred).reshape(R, n) - force.reshape(R, n)
+            band[:, 0, :] += mass_term
+            ratio_now = np.max(np.abs(residual) * tolerance_inverse, axis=1)
+            ratio = np.where(active, ratio_now, ratio)
+            done = active & (ratio_now <= 1.0)
+            converged |= done
+            active &= ~done
+            if not active.any() or it == max_iterations:
+                break
+            rhs = -residual
+            solve_banded_symmetric(band, rhs, disc.free, active)
+            q[active] += rhs[active].reshape(-1, N, S)
+            iterations[active] += 1
+
+        new_state = RodState(q=q.reshape(state.q.shape), velocity=((q - q_old) / dt).reshape(state.q.shape),
+                             time=state.time + dt)
+        if disc.model == "3d":
+            tangent = np.empty((R, N - 1, 3))
+            director = np.empty((R, N - 1, 3))
+            reference_twist = np.empty((R, N))
+            rod3d_update_frames(q, *frames_old, tangent, director, reference_twist)
+            shape = state.q.shape[:3]
+            new_state = replace(new_state, tangent=tangent.reshape(shape[:2] + (N - 1, 3)),
+                                director=director.reshape(shape[:2] + (N - 1, 3)),
+                                reference_twist=reference_twist.reshape(shape))
+        B, F = self.batch_size, self.n_fingers
+        ratio = np.where(np.isfinite(ratio), ratio, np.inf)
+        return StepResult(state=new_state, converged=converged.reshape(B, F).all(axis=1),
+                          newton_iterations=iterations.reshape(B, F).max(axis=1),
+                          residual=ratio.reshape(B, F).max(axis=1))
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A scripted run: world node positions after every step, and the solver's counters."""
+
+    times: np.ndarray
+    """t = 0, Δt, 2Δt, … [s], (K + 1,)."""
+    positions: np.ndarray
+    """World node positions [m], (K + 1, B, F, N, 3); index 0 is the initial state."""
+    newton_iterations: np.ndarray
+    """(K, B)."""
+    converged: np.ndarray
+    """(K, B)."""
+    final_state: RodState
+
+
+def run_ramp(scene: Scene, batch_size: int = 1, progress: Callable[[int, int], None] | None = None) -> Trajectory:
+    """Run the scene's scripted ramp κ̄(t) = rate·t (t at the start of each step) for its duration."""
+    sim = Simulator(scene, batch_size)
+    state = sim.initial_state()
+    n_steps = scene.n_steps
+    positions = [sim.world_positions(state)]
+    iterations, converged = [], []
+    for k in range(n_steps):
+        result = sim.step(state, scene.natural_curvature_rate * state.time)
+        state = result.state
+        positions.append(sim.world_positions(state))
+        iterations.append(result.newton_iterations)
+        converged.append(result.converged)
+        if progress is not None:
+            progress(k + 1, n_steps)
+    return Trajectory(times=np.arange(n_steps + 1) * scene.time_step, positions=np.stack(positions),
+                      newton_iterations=np.stack(iterations), converged=np.stack(converged), final_state=state)
