@@ -1,0 +1,177 @@
+"""Finite-difference checks of every energy's gradient and Hessian, planar and 3-D, at random curved configurations,
+and of the force models' Jacobians."""
+
+import numpy as np
+import pytest
+
+from soft_gripper_env.physics import (Discretization, MassProportionalDamping, Scene, StokesDrag, cantilever_scene,
+                                      paper_finger)
+from soft_gripper_env.physics.config import GripperDesign
+from soft_gripper_env.physics.rod_3d import rod3d_elastic, rod3d_update_frames
+from soft_gripper_env.physics.rod_planar import planar_elastic
+
+
+def band_to_dense(band):
+    kd1, n = band.shape
+    dense = np.zeros((n, n))
+    for k in range(kd1):
+        for j in range(n - k):
+            dense[j + k, j] = dense[j, j + k] = band[k, j]
+    return dense
+
+
+def rod_parameters(n_nodes, rng):
+    """Non-uniform stiffnesses, so that an index slip in any stencil shows."""
+    rest = rng.uniform(0.04, 0.06, n_nodes - 1)
+    return dict(rest=rest, ea=rng.uniform(2.0, 4.0, n_nodes - 1), ei=rng.uniform(0.1, 0.3, n_nodes),
+                gj=rng.uniform(0.1, 0.2, n_nodes), voronoi=rng.uniform(0.04, 0.06, n_nodes))
+
+
+class PlanarRod:
+    def __init__(self, rng, n_nodes=7):
+        self.p = rod_parameters(n_nodes, rng)
+        s = np.concatenate([[0.0], np.cumsum(self.p["rest"])])
+        self.q = np.stack([s, np.zeros(n_nodes)], axis=1)[None] + rng.normal(scale=0.015, size=(1, n_nodes, 2))
+        self.kappa_bar = np.array([rng.uniform(-0.6, 0.6)])
+        self.n_nodes = n_nodes
+
+    def evaluate(self, q, hessian=True):
+        p = self.p
+        force = np.zeros_like(q)
+        band = np.zeros((1, 6, q.size))
+        energy = planar_elastic(q, p["rest"], p["ea"], p["ei"], p["voronoi"], self.kappa_bar, force, band, hessian)
+        return energy[0], -force.ravel(), band_to_dense(band[0])
+
+
+class Rod3D:
+    """A random curved, twisted rod whose start-of-step frames are adapted to it (tangents match, random directors)."""
+
+    def __init__(self, rng, n_nodes=6):
+        self.p = rod_parameters(n_nodes, rng)
+        s = np.concatenate([[0.0], np.cumsum(self.p["rest"])])
+        q = np.zeros((1, n_nodes, 4))
+        q[0, :, 0] = s
+        q[0, :, :3] += rng.normal(scale=0.012, size=(n_nodes, 3))
+        q[0, :-1, 3] = rng.normal(scale=0.4, size=n_nodes - 1)
+        self.q = q
+        t = np.diff(q[0, :, :3], axis=0)
+        t /= np.linalg.norm(t, axis=1)[:, None]
+        a = rng.normal(size=t.shape)
+        a -= np.sum(a * t, axis=1)[:, None] * t
+        a /= np.linalg.norm(a, axis=1)[:, None]
+        self.tangent, self.director = t[None], a[None]
+        ref_twist = np.empty((1, n_nodes))
+        rod3d_update_frames(q, self.tangent, self.director, np.zeros((1, n_nodes)), np.empty_like(self.tangent),
+                            np.empty_like(self.director), ref_twist)
+        self.ref_twist = ref_twist
+        self.kappa_bar = np.array([rng.uniform(-0.6, 0.6)])
+        self.n_nodes = n_nodes
+
+    def evaluate(self, q, hessian=True):
+        p = self.p
+        force = np.zeros_like(q)
+        band = np.zeros((1, 11, q.size))
+        energy = rod3d_elastic(q, self.tangent, self.director, self.ref_twist, p["rest"], p["ea"], p["ei"], p["gj"],
+                               p["voronoi"], self.kappa_bar, force, band, hessian)
+        return energy[0], -force.ravel(), band_to_dense(band[0])
+
+
+def energy_gradient_fd(rod, h=1e-6):
+    q0 = rod.q.ravel()
+    grad = np.zeros(q0.size)
+    for j in range(q0.size):
+        dq = np.zeros(q0.size)
+        dq[j] = h
+        grad[j] = (rod.evaluate((q0 + dq).reshape(rod.q.shape), False)[0]
+                   - rod.evaluate((q0 - dq).reshape(rod.q.shape), False)[0]) / (2 * h)
+    return grad
+
+
+def energy_hessian_fd(rod, h):
+    """Second central differences of the energy itself, Richardson-extrapolated (error O(h⁴))."""
+    q0 = rod.q.ravel()
+    n = q0.size
+
+    def second_difference(step):
+        energy = lambda d: rod.evaluate((q0 + d).reshape(rod.q.shape), False)[0]  # noqa: E731
+        out = np.zeros((n, n))
+        for i in range(n):
+            for j in range(i, n):
+                di = np.zeros(n)
+                dj = np.zeros(n)
+                di[i] = step
+                dj[j] = step
+                out[i, j] = out[j, i] = (energy(di + dj) - energy(di - dj) - energy(dj - di)
+                                         + energy(-di - dj)) / (4 * step * step)
+        return out
+
+    return (4 * second_difference(h / 2) - second_difference(h)) / 3
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_planar_gradient_and_hessian(seed):
+    rod = PlanarRod(np.random.default_rng(seed))
+    _, grad, hess = rod.evaluate(rod.q)
+    assert np.abs(grad).max() > 1.0  # a curved, stretched configuration: the check is not vacuous
+    np.testing.assert_allclose(grad, energy_gradient_fd(rod), rtol=0, atol=1e-6 * np.abs(grad).max())
+    # No frames in the planar model: the analytic gradient is exact everywhere, so difference it directly.
+    h = 1e-6
+    fd = np.zeros_like(hess)
+    for j in range(rod.q.size):
+        dq = np.zeros(rod.q.size)
+        dq[j] = h
+        fd[:, j] = (rod.evaluate(rod.q + dq.reshape(rod.q.shape))[1]
+                    - rod.evaluate(rod.q - dq.reshape(rod.q.shape))[1]) / (2 * h)
+    np.testing.assert_allclose(hess, fd, rtol=0, atol=1e-6 * np.abs(hess).max())
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_3d_gradient_and_hessian(seed):
+    rod = Rod3D(np.random.default_rng(seed))
+    _, grad, hess = rod.evaluate(rod.q)
+    assert np.abs(grad[3::4][:-1]).max() > 1e-2  # twist moments are exercised
+    np.testing.assert_allclose(grad, energy_gradient_fd(rod), rtol=0, atol=1e-6 * np.abs(grad).max())
+    # The frames are transported from the base configuration, so the analytic gradient is the true gradient only
+    # there; compare the Hessian with second differences of the energy instead.
+    np.testing.assert_allclose(hess, energy_hessian_fd(rod, 2e-4), rtol=0, atol=1e-5 * np.abs(hess).max())
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+@pytest.mark.parametrize("force_model", [StokesDrag(viscosity=0.7), MassProportionalDamping(rate=3.0)])
+def test_velocity_force_jacobian(model, force_model):
+    """The Jacobian a force adds equals −d f/d q along v = (q − q_old)/Δt, by finite differences."""
+    scene = Scene(GripperDesign(paper_finger(variable_stiffness=True), finger_angles=(0.0,)), forces=(force_model,),
+                  model=model)
+    disc = Discretization.from_scene(scene)
+    rng = np.random.default_rng(3)
+    N, S, D = disc.n_nodes, disc.stride, disc.dim
+    dt = 0.01
+    q_old = rng.normal(size=(1, N, S))
+
+    def force_and_band(q):
+        force = np.zeros((1, N, S))
+        band = np.zeros((1, disc.band_width + 1, N * S))
+        v = (q - q_old) / dt
+        force_model.accumulate(disc, q[..., :D], v[..., :D], 0.0, force[..., :D], band, 1.0 / dt)
+        return force.ravel(), band_to_dense(band[0])
+
+    q = q_old + rng.normal(scale=1e-3, size=q_old.shape)
+    f0, jac = force_and_band(q)
+    assert np.abs(f0).max() > 0
+    h = 1e-7
+    for j in range(N * S):
+        dq = np.zeros(N * S)
+        dq[j] = h
+        column = -(force_and_band(q + dq.reshape(q.shape))[0] - force_and_band(q - dq.reshape(q.shape))[0]) / (2 * h)
+        np.testing.assert_allclose(jac[:, j], column, rtol=1e-6, atol=1e-9 * np.abs(jac).max())
+
+
+def test_gravity_only_has_no_jacobian_and_pulls_down():
+    disc = Discretization.from_scene(cantilever_scene())
+    force = np.zeros((1, disc.n_nodes, disc.stride))
+    band = np.zeros((1, disc.band_width + 1, disc.n_dofs))
+    for model in cantilever_scene().forces:
+        model.accumulate(disc, None, None, 0.0, force, band, 100.0)
+    assert not band.any()
+    np.testing.assert_allclose(force[0, :, 1], -disc.node_mass * 9.81)
+    np.testing.assert_allclose(force[0, :, 0], 0.0)

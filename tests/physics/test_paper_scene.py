@@ -1,0 +1,80 @@
+"""Invariants of the paper's scene (physics.md §1): the two rod models agree, the fingers are identical up to
+rotation, the rod barely stretches, Newton converges quickly, and batch members do not influence each other."""
+
+import math
+
+import numpy as np
+import pytest
+
+from soft_gripper_env.physics import Simulator, paper_scene, run_ramp
+
+
+@pytest.fixture(scope="module")
+def paper_runs():
+    return {model: run_ramp(paper_scene(model)) for model in ("planar", "3d")}
+
+
+def test_planar_and_3d_models_agree(paper_runs):
+    difference = np.abs(paper_runs["planar"].positions - paper_runs["3d"].positions).max()
+    assert difference <= 1e-6
+    assert np.abs(paper_runs["3d"].positions[-1, 0, 0, -1, 2]) > 0.1  # the fingers really curl
+
+
+def test_fingers_identical_up_to_rotation(paper_runs):
+    x = paper_runs["3d"].positions[:, 0]  # (K+1, F, N, 3)
+    for k, angle in enumerate(paper_scene().gripper.finger_angles):
+        c, s = math.cos(-angle), math.sin(-angle)
+        rotation = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        np.testing.assert_allclose(x[:, k] @ rotation.T, x[:, 0], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_stretching_strain_below_one_percent(paper_runs, model):
+    x = paper_runs[model].positions
+    lengths = np.linalg.norm(np.diff(x, axis=-2), axis=-1)
+    strain = np.abs(lengths / paper_scene().gripper.finger.edge_length - 1)
+    assert strain.max() < 0.01
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_newton_converges_within_five_iterations(paper_runs, model):
+    run = paper_runs[model]
+    assert run.converged.all()
+    assert run.newton_iterations.max() <= 5
+    assert run.newton_iterations.min() >= 1
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_batch_members_are_independent(model):
+    """Different actuation per gripper in one batch gives bit-identical results to separate runs."""
+    scene = paper_scene(model)
+    curvatures = np.array([-0.05, -0.12, -0.2])
+    batched = Simulator(scene, batch_size=3)
+    state = batched.initial_state()
+    singles = [Simulator(scene) for _ in curvatures]
+    single_states = [sim.initial_state() for sim in singles]
+    for _ in range(15):
+        state = batched.step(state, curvatures[:, None] * np.ones(3)).state
+        single_states = [sim.step(st, c).state for sim, st, c in zip(singles, single_states, curvatures)]
+    for b, single in enumerate(single_states):
+        np.testing.assert_array_equal(state.q[b], single.q[0])
+
+
+def test_result_reports_convergence_and_residual():
+    sim = Simulator(paper_scene())
+    result = sim.step(sim.initial_state(), -0.1)
+    assert result.converged.dtype == bool and result.converged.shape == (1,)
+    assert 0 <= result.residual[0] <= 1.0
+    assert result.state.time == pytest.approx(0.01)
+
+
+def test_nonconvergence_is_reported_not_raised():
+    from soft_gripper_env.physics import NewtonSettings
+    from soft_gripper_env.physics.config import replace
+
+    scene = replace(paper_scene(), newton=NewtonSettings(max_iterations=1, relative_tolerance=1e-12))
+    sim = Simulator(scene)
+    result = sim.step(sim.initial_state(), -0.5)
+    assert not result.converged[0]
+    assert result.residual[0] > 1.0
+    assert result.newton_iterations[0] == 1
