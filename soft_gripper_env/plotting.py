@@ -1,0 +1,56 @@
+"""Figures of gripper runs: fingertip height against time, and 3-D time-lapses. Uses matplotlib's Agg back end."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .physics.simulator import Trajectory  # noqa: E402
+
+
+def plot_tip_height(ax, trajectory: Trajectory, label: str, finger: int = 0, **style) -> None:
+    """Tip z [m] of one finger against time [s]."""
+    ax.plot(trajectory.times, trajectory.positions[:, 0, finger, -1, 2], label=label, **style)
+    ax.set_xlabel("time t [s]")
+    ax.set_ylabel("fingertip z [m]")
+    ax.grid(True, alpha=0.3)
+
+
+def plot_timelapse(ax, trajectory: Trajectory, every: float = 0.1) -> None:
+    """Every finger at times 0, every, 2·every, … [s], coloured from light (early) to dark (late), on a 3-D axis."""
+    dt = trajectory.times[1] - trajectory.times[0]
+    stride = max(1, int(round(every / dt)))
+    frames = range(0, len(trajectory.times), stride)
+    colours = plt.cm.viridis(np.linspace(0.9, 0.0, len(frames)))
+    for colour, k in zip(colours, frames):
+        for finger in trajectory.positions[k, 0]:
+            ax.plot(finger[:, 0], finger[:, 1], finger[:, 2], color=colour, lw=1.6)
+            ax.scatter(*finger[-1], color=colour, s=6)
+    ax.scatter([0], [0], [0], color="k", s=25, marker="s", label="palm")
+    span = np.abs(trajectory.positions[..., :2]).max()
+    ax.set_xlim(-span, span)
+    ax.set_ylim(-span, span)
+    ax.set_zlim(trajectory.positions[..., 2].min() * 1.05, span * 0.3)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_zlabel("z [m]")
+    ax.view_init(elev=14, azim=-60)
+    sm = plt.cm.ScalarMappable(cmap="viridis_r", norm=plt.Normalize(trajectory.times[0], trajectory.times[-1]))
+    ax.figure.colorbar(sm, ax=ax, shrink=0.6, pad=0.1, label="time [s]")
+
+
+def new_figure(n_panels: int = 1, three_d: tuple[bool, ...] | None = None, width: float = 5.5):
+    """A figure with ``n_panels`` side by side; ``three_d`` marks which are 3-D axes."""
+    three_d = three_d or (False,) * n_panels
+    fig = plt.figure(figsize=(width * n_panels, 4.3))
+    axes = [fig.add_subplot(1, n_panels, i + 1, projection="3d" if is3d else None) for i, is3d in enumerate(three_d)]
+    return fig, axes
+
+
+def save(fig, path) -> None:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
