@@ -17,7 +17,8 @@ from dataclasses import replace
 from functools import cache
 from pathlib import Path
 
-from soft_gripper_env.physics import ELASTOSIL_MA_4601, SOFT_TRANSLUCENT_SILICONE, Trajectory, paper_scene, run_ramp
+from soft_gripper_env.physics import (ELASTOSIL_MA_4601, PAPER_DEFECTIVE_DRAG, SOFT_TRANSLUCENT_SILICONE, Trajectory,
+                                      paper_scene, run_ramp)
 from soft_gripper_env.plotting import new_figure, plot_timelapse, plot_tip_height, save
 
 CASES = ("fig5", "fig6", "fig7", "fig8", "fig9", "fig12")
@@ -39,19 +40,28 @@ def paper_run(model: str) -> Trajectory:
     return run_ramp(paper_scene(model))
 
 
+def plot_paper_defect(ax, model: str, material) -> None:
+    """Overlay the same scene with the drag that produced the paper's curves (η = 1000 Pa·s on nodes 2–4)."""
+    run = run_ramp(paper_scene(model, material=material, drag=PAPER_DEFECTIVE_DRAG))
+    plot_tip_height(ax, run, "paper's defective drag: η = 1000 Pa·s on nodes 2–4", ls=":", color="tab:red")
+
+
 def run_case(case: str, model: str, out: Path) -> dict[str, Trajectory]:
     """Runs one case, writes DIR/<case>.png and DIR/<case>.csv, returns its trajectories by label."""
     base = paper_run(model)
     if case == "fig5":
         runs = {"Elastosil, Stokes drag (water)": base}
         fig, (ax,) = new_figure()
-        plot_tip_height(ax, base, "Elastosil MA 4601")
+        plot_tip_height(ax, base, "Elastosil MA 4601, Stokes drag at η = 1.0e-3 Pa·s")
+        plot_paper_defect(ax, model, ELASTOSIL_MA_4601)
         ax.set_title("Fig. 5: fingertip height, κ̄ = −0.15·t")
+        ax.legend()
     elif case == "fig6":
         runs = {"E = 100 kPa": run_ramp(paper_scene(model, material=SOFT_100KPA))}
         fig, (ax,) = new_figure()
         plot_tip_height(ax, runs["E = 100 kPa"], "E = 100 kPa")
         plot_tip_height(ax, base, "E = 386.66 kPa (Fig. 5)", ls="--", color="gray")
+        plot_paper_defect(ax, model, SOFT_100KPA)
         ax.set_title("Fig. 6: softer finger, E = 100 kPa")
         ax.legend()
     elif case == "fig7":

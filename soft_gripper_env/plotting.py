@@ -37,7 +37,7 @@ def plot_timelapse(ax, trajectory: Trajectory, every: float = 0.1) -> None:
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_zlabel("z [m]")
-    ax.view_init(elev=14, azim=-60)
+    ax.view_init(elev=14, azim=-30)  # no finger points along the line of sight
     sm = plt.cm.ScalarMappable(cmap="viridis_r", norm=plt.Normalize(trajectory.times[0], trajectory.times[-1]))
     ax.figure.colorbar(sm, ax=ax, shrink=0.6, pad=0.1, label="time [s]")
 

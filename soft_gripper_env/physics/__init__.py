@@ -5,6 +5,7 @@ Pure NumPy/SciPy with Numba-compiled kernels; it never imports gymnasium, torch 
 
 from .config import (
     ELASTOSIL_MA_4601,
+    PAPER_DEFECTIVE_DRAG,
     SOFT_TRANSLUCENT_SILICONE,
     WATER_VISCOSITY,
     FingerDesign,
@@ -22,7 +23,7 @@ from .forces import Buoyancy, ForceModel, Gravity, MassProportionalDamping, Stok
 from .simulator import RodState, Simulator, StepResult, Trajectory, run_ramp
 
 __all__ = [
-    "ELASTOSIL_MA_4601", "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "FingerDesign", "GripperDesign",
+    "ELASTOSIL_MA_4601", "PAPER_DEFECTIVE_DRAG", "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "FingerDesign", "GripperDesign",
     "Material", "NewtonSettings", "Scene", "cantilever_scene", "linear_taper", "paper_finger", "paper_scene",
     "Discretization", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping", "StokesDrag", "RodState",
     "Simulator", "StepResult", "Trajectory", "run_ramp",

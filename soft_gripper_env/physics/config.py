@@ -196,6 +196,8 @@ class Scene:
         for force in self.forces:
             if not isinstance(force, ForceModel):
                 raise ValueError(f"Scene.forces must hold ForceModel instances, got {type(force).__name__}")
+            if isinstance(force, StokesDrag):
+                force.check_nodes(self.gripper.finger.n_nodes)
 
     @property
     def n_steps(self) -> int:
@@ -214,17 +216,23 @@ def paper_finger(material: Material = ELASTOSIL_MA_4601, variable_stiffness: boo
     return FingerDesign(length=0.2, n_nodes=n_nodes, radius=radius, material=material, clamp=clamp)
 
 
+PAPER_DEFECTIVE_DRAG = StokesDrag(viscosity=1000.0, nodes=(2, 3, 4))
+"""The drag that produced the paper's published curves (physics.md §2): η = 10⁶ × water's, on nodes 2–4 only."""
+
+
 def paper_scene(model: RodModel = "planar", *, material: Material = ELASTOSIL_MA_4601,
-                variable_stiffness: bool = False, drag: bool = True,
-                viscosity: float = WATER_VISCOSITY) -> Scene:
+                variable_stiffness: bool = False, drag: bool | StokesDrag = True) -> Scene:
     """The paper's three-finger scene, exactly as ``physics.md`` §1 gives it.
 
-    Full dry weight (no buoyancy), per-node Stokes drag c = 6πrη at ``viscosity`` [Pa·s] when ``drag``, the ramp
-    κ̄ = −0.15·t, backward Euler at Δt = 0.01 s for T = 1 s, the paper's clamp.
+    Full dry weight (no buoyancy), the ramp κ̄ = −0.15·t, backward Euler at Δt = 0.01 s for T = 1 s, the paper's
+    clamp. ``drag``: True for per-node Stokes drag c = 6πrη at water's viscosity, False for none, or a given
+    :class:`StokesDrag` (such as :data:`PAPER_DEFECTIVE_DRAG`).
     """
     forces: tuple[ForceModel, ...] = (Gravity(),)
-    if drag:
-        forces += (StokesDrag(viscosity=viscosity),)
+    if drag is True:
+        forces += (StokesDrag(viscosity=WATER_VISCOSITY),)
+    elif isinstance(drag, StokesDrag):
+        forces += (drag,)
     finger = paper_finger(material, variable_stiffness)
     return Scene(gripper=GripperDesign(finger), forces=forces, model=model)
 
@@ -239,5 +247,5 @@ def cantilever_scene(n_nodes: int = 20, clamp: ClampConvention = "accurate", mod
 
 
 __all__ = ["Material", "FingerDesign", "GripperDesign", "NewtonSettings", "Scene", "ELASTOSIL_MA_4601",
-           "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "linear_taper", "paper_finger", "paper_scene",
+           "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "PAPER_DEFECTIVE_DRAG", "linear_taper", "paper_finger", "paper_scene",
            "cantilever_scene", "check_range", "replace"]

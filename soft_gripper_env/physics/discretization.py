@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import Scene
+from .linalg import band_diagonal
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,9 +77,8 @@ class Discretization:
 
     def add_to_position_diagonal(self, system_band: np.ndarray, values: np.ndarray) -> None:
         """Add ``values`` (N, D) or (R, N, D) to the diagonal entries of the position DOFs of ``system_band``."""
-        diagonal = system_band[:, 0, :].reshape(system_band.shape[0], self.n_nodes, self.stride)
-        # ``reshape`` of the (R, n) diagonal slice must be a view, or this would silently write into a copy.
-        assert np.shares_memory(diagonal, system_band)
+        # copy=False: a reshape that needed a copy would silently drop the update, so it must fail instead
+        diagonal = band_diagonal(system_band).reshape(system_band.shape[0], self.n_nodes, self.stride, copy=False)
         diagonal[..., : self.dim] += values
 
     def world_positions(self, q: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ name                       meaning                                              
 ``positions``              node positions, planar (s, z) or 3-D (x, y, z) [m]          (R, N, D)
 ``velocities``             node velocities [m/s]                                       (R, N, D)
 ``force``                  generalized force, accumulated into [N]                     (R, N, D)
-``system_band``            lower band of the Newton matrix, accumulated into [N/m]     (R, kd+1, n)
+``system_band``            band of the Newton matrix (see ``linalg``), accumulated     (R, n, kd+1)
 =========================  ==========================================================  ========
 
 R counts rods (batch × fingers), N nodes, D = 2 (planar) or 3, n the DOFs per rod. A model adds its force f to
@@ -80,16 +80,35 @@ class StokesDrag(ForceModel):
     """The paper's per-node Stokes drag f_i = −6π·r_i·η·v_i (each node treated as a sphere of the rod's radius).
 
     A low-Reynolds law, kept for reproducing the paper; at water's viscosity it is negligible (physics.md §3).
+    ``nodes`` restricts it to some nodes: the paper's published curves came from η = 1000 Pa·s acting on nodes 2–4
+    only (physics.md §2), which ``StokesDrag(viscosity=1000.0, nodes=(2, 3, 4))`` reproduces.
     """
 
     viscosity: float = 1.0e-3
     """Dynamic viscosity η [Pa·s]."""
+    nodes: tuple[int, ...] | None = None
+    """Indices of the nodes it acts on; None for every node."""
 
     def __post_init__(self) -> None:
         _check_positive("StokesDrag", "viscosity", self.viscosity, "Pa·s")
+        if self.nodes is not None:
+            nodes = tuple(self.nodes)
+            if not nodes or any(not isinstance(i, (int, np.integer)) or i < 0 for i in nodes):
+                raise ValueError(f"StokesDrag.nodes = {self.nodes!r} must be None or non-negative node indices")
+            object.__setattr__(self, "nodes", nodes)
+
+    def check_nodes(self, n_nodes: int) -> None:
+        """Raise ValueError if ``nodes`` names a node beyond a finger of ``n_nodes`` nodes."""
+        if self.nodes is not None and max(self.nodes) >= n_nodes:
+            raise ValueError(f"StokesDrag.nodes = {self.nodes!r} names node {max(self.nodes)}; the finger has nodes "
+                             f"0 … {n_nodes - 1}")
 
     def accumulate(self, disc, positions, velocities, time, force, system_band, velocity_derivative):
         coefficient = 6.0 * math.pi * self.viscosity * disc.node_radius  # [N·s/m], shape (N,)
+        if self.nodes is not None:
+            selected = np.zeros_like(coefficient)
+            selected[list(self.nodes)] = coefficient[list(self.nodes)]
+            coefficient = selected
         _add_linear_damping(disc, coefficient, velocities, force, system_band, velocity_derivative)
 
 

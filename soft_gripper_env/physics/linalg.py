@@ -1,7 +1,9 @@
 """The one linear solve of the simulator: many small symmetric banded systems, one per rod.
 
-This is the only place that depends on how the solve is done, so a GPU back end replaces this function alone.
-Band storage is LAPACK's lower form: ``band[r, k, j]`` holds A[j + k, j] of rod r, k = 0 … kd.
+This is the only place that depends on how the solve is done, so a GPU back end replaces this module alone.
+Band storage is row-major: ``band[r, i, kd − (i − j)]`` holds A[i, j] of rod r for i − kd ≤ j ≤ i, so row i of the
+lower triangle, diagonal last (``band[r, i, kd]``), is one contiguous run and the factorisation's inner loops are
+contiguous dot products.
 """
 
 from __future__ import annotations
@@ -11,61 +13,108 @@ from numba import njit
 
 
 @njit(cache=True)
-def solve_banded_symmetric(band, rhs, free, active):
-    """Solve A·x = rhs for every active rod in place (``rhs`` becomes x; ``band`` is overwritten by its factors).
+def scatter_contiguous(band, offset, hessian, m):
+    """Add the symmetric m×m ``hessian`` of DOFs offset … offset+m−1 into one rod's band (n, kd+1)."""
+    kd = band.shape[1] - 1
+    for a in range(m):
+        row = band[offset + a]
+        for b in range(a + 1):
+            row[kd - a + b] += hessian[a, b]
+
+
+def band_diagonal(band: np.ndarray) -> np.ndarray:
+    """The diagonal of every rod's matrix, a writable (R, n) view of ``band`` (R, n, kd+1)."""
+    return band[:, :, -1]
+
+
+@njit(cache=True)
+def solve_banded_symmetric_rod(a, x, free):
+    """Solve A·x = b for one rod in place: ``x`` holds b on entry and the solution on return; ``a`` (n, kd+1) is
+    overwritten by the factors. Returns False if a pivot was zero or not finite (``x`` is then NaN).
 
     Rows and columns of DOFs where ``free`` is False are replaced by the identity with a zero right-hand side, so
     fixed DOFs get no update. A symmetric LDLᵀ factorisation without pivoting: the Newton matrix of an implicit step
     is dominated by its positive mass term, and LDLᵀ costs about a third less than a general band LU.
-
-    band: (R, kd+1, n); rhs: (R, n); free: (n,) bool; active: (R,) bool. Returns the number of rods whose
-    factorisation met a zero or non-finite pivot (their solution is set to NaN).
     """
-    n_rods, kd1, n = band.shape
+    n, kd1 = a.shape
     kd = kd1 - 1
-    failures = 0
+    for i in range(n):
+        if not free[i]:
+            a[i, :] = 0.0
+            a[i, kd] = 1.0
+            x[i] = 0.0
+            for k in range(1, min(kd, n - 1 - i) + 1):  # column i below the diagonal
+                a[i + k, kd - k] = 0.0
+    t = np.empty(kd1)
+    for i in range(n):  # row-oriented LDLᵀ: t_k = L[i,k]·d_k, then L[i,k] = t_k/d_k
+        j0 = max(0, i - kd)
+        row = a[i]
+        for k in range(j0, i):
+            rk = a[k]
+            s = row[kd - i + k]
+            for m in range(j0, k):
+                s -= t[m - j0] * rk[kd - k + m]
+            t[k - j0] = s
+        d = row[kd]
+        for k in range(j0, i):
+            lik = t[k - j0] / a[k, kd]
+            d -= t[k - j0] * lik
+            row[kd - i + k] = lik
+        if d == 0.0 or not np.isfinite(d):
+            x[:] = np.nan
+            return False
+        row[kd] = d
+    for i in range(n):  # L y = b
+        s = x[i]
+        row = a[i]
+        for k in range(max(0, i - kd), i):
+            s -= row[kd - i + k] * x[k]
+        x[i] = s
+    for i in range(n):  # D z = y
+        x[i] /= a[i, kd]
+    for i in range(n - 1, -1, -1):  # Lᵀ x = z
+        xi = x[i]
+        row = a[i]
+        for k in range(max(0, i - kd), i):
+            x[k] -= row[kd - i + k] * xi
+    return True
+
+
+@njit(cache=True)
+def newton_iteration(q, q_pred, force, band, mass_term, tolerance_inverse, free, active, converged, iterations,
+                     ratio, solve):
+    """One Newton iteration of an implicit step for every active rod, in place.
+
+    With the residual r = M·(q − q_pred)·(1/Δt²) − f (``mass_term`` = M/Δt² per DOF), a rod whose largest
+    ``|r|·tolerance_inverse`` is ≤ 1 is marked converged and inactive; otherwise, if ``solve``, the mass term is added
+    to its band and q += (M/Δt² − ∂f/∂q)⁻¹·(−r). q, q_pred, force: (R, n); band: (R, n, kd+1). Returns the number of
+    rods still active.
+    """
+    n_rods, n = q.shape
+    rhs = np.empty(n)
+    still_active = 0
     for r in range(n_rods):
         if not active[r]:
             continue
-        a = band[r]
-        x = rhs[r]
+        largest = 0.0
         for j in range(n):
-            if not free[j]:
-                for k in range(kd1):
-                    a[k, j] = 0.0
-                for k in range(1, min(kd, j) + 1):
-                    a[k, j - k] = 0.0
-                a[0, j] = 1.0
-                x[j] = 0.0
-        ok = True
-        for j in range(n):
-            d = a[0, j]
-            for k in range(max(0, j - kd), j):
-                ljk = a[j - k, k]
-                d -= ljk * ljk * a[0, k]
-            if d == 0.0 or not np.isfinite(d):
-                ok = False
-                break
-            a[0, j] = d
-            for i in range(j + 1, min(n, j + kd1)):
-                s = a[i - j, j]
-                for k in range(max(0, i - kd), j):
-                    s -= a[i - k, k] * a[j - k, k] * a[0, k]
-                a[i - j, j] = s / d
-        if not ok:
-            failures += 1
-            x[:] = np.nan
+            rhs[j] = force[r, j] - mass_term[j] * (q[r, j] - q_pred[r, j])
+            scaled = abs(rhs[j]) * tolerance_inverse[j]
+            if not scaled <= largest:  # also catches NaN
+                largest = scaled
+        ratio[r] = largest
+        if largest <= 1.0:
+            converged[r] = True
+            active[r] = False
             continue
-        for j in range(n):  # L y = b
-            s = x[j]
-            for k in range(max(0, j - kd), j):
-                s -= a[j - k, k] * x[k]
-            x[j] = s
-        for j in range(n):  # D z = y
-            x[j] /= a[0, j]
-        for j in range(n - 1, -1, -1):  # Lᵀ x = z
-            s = x[j]
-            for i in range(j + 1, min(n, j + kd1)):
-                s -= a[i - j, j] * x[i]
-            x[j] = s
-    return failures
+        still_active += 1
+        if not solve:
+            continue
+        kd = band.shape[2] - 1
+        for j in range(n):
+            band[r, j, kd] += mass_term[j]
+        solve_banded_symmetric_rod(band[r], rhs, free)
+        for j in range(n):
+            q[r, j] += rhs[j]
+        iterations[r] += 1
+    return still_active

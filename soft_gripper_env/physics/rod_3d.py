@@ -33,203 +33,225 @@ import math
 import numpy as np
 from numba import njit
 
-from .rod_planar import scatter_contiguous
+from .linalg import scatter_contiguous
 
 
-@njit(cache=True, inline="always")
+# 3-vectors are tuples: value types that Numba keeps in registers, so the kernel allocates nothing per node.
+
+
+@njit(cache=True)
 def _cross(a, b):
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@njit(cache=True)
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def _axpy(alpha, a, beta, b):
+    """alpha·a + beta·b."""
+    return (alpha * a[0] + beta * b[0], alpha * a[1] + beta * b[1], alpha * a[2] + beta * b[2])
+
+
+@njit(cache=True)
+def _scale(alpha, a):
+    return (alpha * a[0], alpha * a[1], alpha * a[2])
+
+
+@njit(cache=True)
+def _row(array, i):
+    return (array[i, 0], array[i, 1], array[i, 2])
 
 
 @njit(cache=True)
 def _parallel_transport(u, t1, t2):
     """Transport vector u from tangent t1 to tangent t2 (rotation about t1 × t2)."""
     b = _cross(t1, t2)
-    nb = math.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
+    nb = math.sqrt(_dot(b, b))
     if nb < 1e-15:
-        return u.copy()
-    b = b / nb
+        return u
+    b = _scale(1.0 / nb, b)
     n1 = _cross(t1, b)
     n2 = _cross(t2, b)
-    return np.dot(u, t1) * t2 + np.dot(u, n1) * n2 + np.dot(u, b) * b
+    return _axpy(_dot(u, t1), t2, 1.0, _axpy(_dot(u, n1), n2, _dot(u, b), b))
 
 
 @njit(cache=True)
 def _rotate(v, axis, angle):
     c = math.cos(angle)
     s = math.sin(angle)
-    return v * c + _cross(axis, v) * s + axis * (np.dot(axis, v) * (1.0 - c))
+    return _axpy(c, v, 1.0, _axpy(s, _cross(axis, v), _dot(axis, v) * (1.0 - c), axis))
 
 
 @njit(cache=True)
 def _signed_angle(u, v, axis):
     w = _cross(u, v)
-    angle = math.atan2(math.sqrt(np.dot(w, w)), np.dot(u, v))
-    return -angle if np.dot(axis, w) < 0.0 else angle
+    angle = math.atan2(math.sqrt(_dot(w, w)), _dot(u, v))
+    return -angle if _dot(axis, w) < 0.0 else angle
 
 
 @njit(cache=True)
-def rod_frames(qr, tangent_old, director_old, ref_twist_old, tangent, director1, director2, ref_twist, m1, m2):
-    """Frames of one rod at coordinates ``qr`` (N, 4), transported from the start-of-step frame."""
+def rod_frames(qr, tangent_old, director_old, ref_twist_old, tangent, director1, ref_twist, m1, m2, lengths):
+    """Frames of one rod at coordinates ``qr`` (N, 4), transported from the start-of-step frame.
+
+    Writes edge ``tangent``, reference ``director1``, material directors ``m1``, ``m2`` (N − 1, 3), edge
+    ``lengths`` (N − 1,) and the ``ref_twist`` (N,) of the interior nodes.
+    """
     n_edges = qr.shape[0] - 1
     for e in range(n_edges):
-        d = qr[e + 1, :3] - qr[e, :3]
-        t = d / math.sqrt(np.dot(d, d))
-        tangent[e] = t
-        a1 = _parallel_transport(director_old[e], tangent_old[e], t)
-        a1 = a1 - np.dot(a1, t) * t
-        a1 = a1 / math.sqrt(np.dot(a1, a1))
+        d = (qr[e + 1, 0] - qr[e, 0], qr[e + 1, 1] - qr[e, 1], qr[e + 1, 2] - qr[e, 2])
+        length = math.sqrt(_dot(d, d))
+        lengths[e] = length
+        t = _scale(1.0 / length, d)
+        a1 = _parallel_transport(_row(director_old, e), _row(tangent_old, e), t)
+        a1 = _axpy(1.0, a1, -_dot(a1, t), t)
+        a1 = _scale(1.0 / math.sqrt(_dot(a1, a1)), a1)
         a2 = _cross(t, a1)
-        director1[e] = a1
-        director2[e] = a2
         c = math.cos(qr[e, 3])
         s = math.sin(qr[e, 3])
-        m1[e] = c * a1 + s * a2
-        m2[e] = -s * a1 + c * a2
+        for k in range(3):
+            tangent[e, k] = t[k]
+            director1[e, k] = a1[k]
+            m1[e, k] = c * a1[k] + s * a2[k]
+            m2[e, k] = -s * a1[k] + c * a2[k]
     ref_twist[0] = 0.0
     ref_twist[n_edges] = 0.0
     for i in range(1, n_edges):
-        u = _parallel_transport(director1[i - 1], tangent[i - 1], tangent[i])
-        u = _rotate(u, tangent[i], ref_twist_old[i])
-        ref_twist[i] = ref_twist_old[i] + _signed_angle(u, director1[i], tangent[i])
+        t = _row(tangent, i)
+        u = _parallel_transport(_row(director1, i - 1), _row(tangent, i - 1), t)
+        u = _rotate(u, t, ref_twist_old[i])
+        ref_twist[i] = ref_twist_old[i] + _signed_angle(u, _row(director1, i), t)
 
 
 @njit(cache=True)
-def _cross_matrix(a):
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-
-
-@njit(cache=True)
-def _assemble_stencil(out, dee, dff, def_, dthe2, dthf2, de_the, de_thf, df_the, df_thf):
-    """11×11 second derivative over (x_{i−1}, θ_e, x_i, θ_f, x_{i+1}) from derivatives w.r.t. e and f."""
-    out[:, :] = 0.0
-    dfe = def_.T
-    out[0:3, 0:3] = dee
-    out[0:3, 4:7] = -dee + def_
-    out[0:3, 8:11] = -def_
-    out[4:7, 0:3] = -dee + dfe
-    out[4:7, 4:7] = dee - def_ - dfe + dff
-    out[4:7, 8:11] = def_ - dff
-    out[8:11, 0:3] = -dfe
-    out[8:11, 4:7] = dfe - dff
-    out[8:11, 8:11] = dff
-    out[3, 3] = dthe2
-    out[7, 7] = dthf2
-    out[0:3, 3] = -de_the
-    out[4:7, 3] = de_the - df_the
-    out[8:11, 3] = df_the
-    out[3, 0:3] = out[0:3, 3]
-    out[3, 4:7] = out[4:7, 3]
-    out[3, 8:11] = out[8:11, 3]
-    out[0:3, 7] = -de_thf
-    out[4:7, 7] = de_thf - df_thf
-    out[8:11, 7] = df_thf
-    out[7, 0:3] = out[0:3, 7]
-    out[7, 4:7] = out[4:7, 7]
-    out[7, 8:11] = out[8:11, 7]
-
-
-@njit(cache=True)
-def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, ref_twist, theta_e, theta_f, kappa_bar, eb, gj, grad, hess,
-                work, accumulate_hessian):
-    """Bending and twisting energy at one interior node; writes its gradient (11,) and Hessian (11, 11)."""
-    identity = np.eye(3)
-    chi = 1.0 + np.dot(te, tf)
-    kb = 2.0 * _cross(te, tf) / chi
-    tilde_t = (te + tf) / chi
-    tilde_d1 = (m1e + m1f) / chi
-    tilde_d2 = (m2e + m2f) / chi
-    kappa1 = 0.5 * np.dot(kb, m2e + m2f)
-    kappa2 = -0.5 * np.dot(kb, m1e + m1f)
-    dk1de = (-kappa1 * tilde_t + _cross(tf, tilde_d2)) / le
-    dk1df = (-kappa1 * tilde_t - _cross(te, tilde_d2)) / lf
-    dk2de = (-kappa2 * tilde_t - _cross(tf, tilde_d1)) / le
-    dk2df = (-kappa2 * tilde_t + _cross(te, tilde_d1)) / lf
-    g1 = np.zeros(11)
-    g2 = np.zeros(11)
-    g1[0:3] = -dk1de
-    g1[4:7] = dk1de - dk1df
-    g1[8:11] = dk1df
-    g1[3] = -0.5 * np.dot(kb, m1e)
-    g1[7] = -0.5 * np.dot(kb, m1f)
-    g2[0:3] = -dk2de
-    g2[4:7] = dk2de - dk2df
-    g2[8:11] = dk2df
-    g2[3] = -0.5 * np.dot(kb, m2e)
-    g2[7] = -0.5 * np.dot(kb, m2f)
-    twist = theta_f - theta_e + ref_twist
-    gt = np.zeros(11)
-    gt[0:3] = -0.5 / le * kb
-    gt[8:11] = 0.5 / lf * kb
-    gt[4:7] = -(gt[0:3] + gt[8:11])
-    gt[3] = -1.0
-    gt[7] = 1.0
+def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, grad, hess, vectors, blocks,
+                accumulate_hessian):
+    """Bending and twisting energy at one interior node; writes its gradient (11,) and Hessian (11, 11) over
+    (x_{i−1}, θ_e, x_i, θ_f, x_{i+1}). ``eb`` = EI/l_i, ``gj`` = GJ/l_i. ``vectors`` (3, 11) and ``blocks``
+    (3, 3, 3) are scratch space."""
+    chi = 1.0 + _dot(te, tf)
+    kb = _scale(2.0 / chi, _cross(te, tf))
+    tt = _scale(1.0 / chi, _axpy(1.0, te, 1.0, tf))
+    d1t = _scale(1.0 / chi, _axpy(1.0, m1e, 1.0, m1f))
+    d2t = _scale(1.0 / chi, _axpy(1.0, m2e, 1.0, m2f))
+    kappa1 = 0.5 * _dot(kb, _axpy(1.0, m2e, 1.0, m2f))
+    kappa2 = -0.5 * _dot(kb, _axpy(1.0, m1e, 1.0, m1f))
+    tf_x_d2t = _cross(tf, d2t)
+    te_x_d2t = _cross(te, d2t)
+    tf_x_d1t = _cross(tf, d1t)
+    te_x_d1t = _cross(te, d1t)
+    dk1de = _axpy(-kappa1 / le, tt, 1.0 / le, tf_x_d2t)
+    dk1df = _axpy(-kappa1 / lf, tt, -1.0 / lf, te_x_d2t)
+    dk2de = _axpy(-kappa2 / le, tt, -1.0 / le, tf_x_d1t)
+    dk2df = _axpy(-kappa2 / lf, tt, 1.0 / lf, te_x_d1t)
+    kb_m1e, kb_m1f = _dot(kb, m1e), _dot(kb, m1f)
+    kb_m2e, kb_m2f = _dot(kb, m2e), _dot(kb, m2f)
     dk1 = kappa1 - kappa_bar
+    w1 = eb * dk1
+    w2 = eb * kappa2
+    w3 = gj * twist
     energy = 0.5 * eb * (dk1 * dk1 + kappa2 * kappa2) + 0.5 * gj * twist * twist
-    grad[:] = eb * (dk1 * g1 + kappa2 * g2) + gj * twist * gt
+    # gradients of κ1, κ2 and the twist over the stencil, as (position blocks, θ_e, θ_f)
+    g1, g2, gt = vectors[0], vectors[1], vectors[2]
+    for k in range(3):
+        g1[k], g1[4 + k], g1[8 + k] = -dk1de[k], dk1de[k] - dk1df[k], dk1df[k]
+        g2[k], g2[4 + k], g2[8 + k] = -dk2de[k], dk2de[k] - dk2df[k], dk2df[k]
+        gt[k] = -0.5 / le * kb[k]
+        gt[8 + k] = 0.5 / lf * kb[k]
+        gt[4 + k] = -gt[k] - gt[8 + k]
+    g1[3], g1[7] = -0.5 * kb_m1e, -0.5 * kb_m1f
+    g2[3], g2[7] = -0.5 * kb_m2e, -0.5 * kb_m2f
+    gt[3], gt[7] = -1.0, 1.0
+    for a in range(11):
+        grad[a] = w1 * g1[a] + w2 * g2[a] + w3 * gt[a]
     if not accumulate_hessian:
         return energy
-    le2 = le * le
-    lf2 = lf * lf
-    tt = np.outer(tilde_t, tilde_t)
-    i_te = identity - np.outer(te, te)
-    i_tf = identity - np.outer(tf, tf)
-    i_tetf = identity + np.outer(te, tf)
-
-    # κ1
-    tf_c_d2t_o_tt = np.outer(_cross(tf, tilde_d2), tilde_t)
-    te_c_d2t_o_tt = np.outer(_cross(te, tilde_d2), tilde_t)
-    kb_o_d2e = np.outer(kb, m2e)
-    kb_o_d2f = np.outer(kb, m2f)
-    d2k1de2 = ((2.0 * kappa1 * tt - tf_c_d2t_o_tt - tf_c_d2t_o_tt.T) / le2 - kappa1 / (chi * le2) * i_te
-               + (kb_o_d2e + kb_o_d2e.T) / (4.0 * le2))
-    d2k1df2 = ((2.0 * kappa1 * tt + te_c_d2t_o_tt + te_c_d2t_o_tt.T) / lf2 - kappa1 / (chi * lf2) * i_tf
-               + (kb_o_d2f + kb_o_d2f.T) / (4.0 * lf2))
-    d2k1dedf = (-kappa1 / (chi * le * lf) * i_tetf
-                + (2.0 * kappa1 * tt - tf_c_d2t_o_tt + te_c_d2t_o_tt.T - _cross_matrix(tilde_d2)) / (le * lf))
-    d2k1de_the = (0.5 * np.dot(kb, m1e) * tilde_t - _cross(tf, m1e) / chi) / le
-    d2k1de_thf = (0.5 * np.dot(kb, m1f) * tilde_t - _cross(tf, m1f) / chi) / le
-    d2k1df_the = (0.5 * np.dot(kb, m1e) * tilde_t + _cross(te, m1e) / chi) / lf
-    d2k1df_thf = (0.5 * np.dot(kb, m1f) * tilde_t + _cross(te, m1f) / chi) / lf
-    _assemble_stencil(work, d2k1de2, d2k1df2, d2k1dedf, -0.5 * np.dot(kb, m2e), -0.5 * np.dot(kb, m2f),
-                      d2k1de_the, d2k1de_thf, d2k1df_the, d2k1df_thf)
-    hess[:, :] = eb * (np.outer(g1, g1) + dk1 * work)
-
-    # κ2
-    tf_c_d1t_o_tt = np.outer(_cross(tf, tilde_d1), tilde_t)
-    te_c_d1t_o_tt = np.outer(_cross(te, tilde_d1), tilde_t)
-    kb_o_d1e = np.outer(kb, m1e)
-    kb_o_d1f = np.outer(kb, m1f)
-    d2k2de2 = ((2.0 * kappa2 * tt + tf_c_d1t_o_tt + tf_c_d1t_o_tt.T) / le2 - kappa2 / (chi * le2) * i_te
-               - (kb_o_d1e + kb_o_d1e.T) / (4.0 * le2))
-    d2k2df2 = ((2.0 * kappa2 * tt - te_c_d1t_o_tt - te_c_d1t_o_tt.T) / lf2 - kappa2 / (chi * lf2) * i_tf
-               - (kb_o_d1f + kb_o_d1f.T) / (4.0 * lf2))
-    d2k2dedf = (-kappa2 / (chi * le * lf) * i_tetf
-                + (2.0 * kappa2 * tt + tf_c_d1t_o_tt - te_c_d1t_o_tt.T + _cross_matrix(tilde_d1)) / (le * lf))
-    d2k2de_the = (0.5 * np.dot(kb, m2e) * tilde_t - _cross(tf, m2e) / chi) / le
-    d2k2de_thf = (0.5 * np.dot(kb, m2f) * tilde_t - _cross(tf, m2f) / chi) / le
-    d2k2df_the = (0.5 * np.dot(kb, m2e) * tilde_t + _cross(te, m2e) / chi) / lf
-    d2k2df_thf = (0.5 * np.dot(kb, m2f) * tilde_t + _cross(te, m2f) / chi) / lf
-    _assemble_stencil(work, d2k2de2, d2k2df2, d2k2dedf, 0.5 * np.dot(kb, m1e), 0.5 * np.dot(kb, m1f),
-                      d2k2de_the, d2k2de_thf, d2k2df_the, d2k2df_thf)
-    hess[:, :] += eb * (np.outer(g2, g2) + kappa2 * work)
-
-    # twist
-    te_p = np.outer(kb, te + tilde_t)
-    tf_p = np.outer(kb, tf + tilde_t)
-    d2m_de2 = -0.25 / le2 * (te_p + te_p.T)
-    d2m_df2 = -0.25 / lf2 * (tf_p + tf_p.T)
-    d2m_dedf = 0.5 / (le * lf) * (2.0 / chi * _cross_matrix(te) - np.outer(kb, tilde_t))
-    zero = np.zeros(3)
-    _assemble_stencil(work, d2m_de2, d2m_df2, d2m_dedf, 0.0, 0.0, zero, zero, zero, zero)
-    hess[:, :] += gj * (np.outer(gt, gt) + twist * work)
+    # Second derivatives with respect to the edges e and f, weighted and summed over κ1 (w1), κ2 (w2), twist (w3).
+    le2, lf2, lelf = le * le, lf * lf, le * lf
+    te_tt = _axpy(1.0, te, 1.0, tt)
+    tf_tt = _axpy(1.0, tf, 1.0, tt)
+    cee, cff, cef = blocks[0], blocks[1], blocks[2]
+    for i in range(3):
+        for j in range(3):
+            delta = 1.0 if i == j else 0.0
+            ttij = tt[i] * tt[j]
+            k1ee = ((2.0 * kappa1 * ttij - tf_x_d2t[i] * tt[j] - tt[i] * tf_x_d2t[j]) / le2
+                    - kappa1 / (chi * le2) * (delta - te[i] * te[j]) + (kb[i] * m2e[j] + m2e[i] * kb[j]) / (4.0 * le2))
+            k1ff = ((2.0 * kappa1 * ttij + te_x_d2t[i] * tt[j] + tt[i] * te_x_d2t[j]) / lf2
+                    - kappa1 / (chi * lf2) * (delta - tf[i] * tf[j]) + (kb[i] * m2f[j] + m2f[i] * kb[j]) / (4.0 * lf2))
+            k2ee = ((2.0 * kappa2 * ttij + tf_x_d1t[i] * tt[j] + tt[i] * tf_x_d1t[j]) / le2
+                    - kappa2 / (chi * le2) * (delta - te[i] * te[j]) - (kb[i] * m1e[j] + m1e[i] * kb[j]) / (4.0 * le2))
+            k2ff = ((2.0 * kappa2 * ttij - te_x_d1t[i] * tt[j] - tt[i] * te_x_d1t[j]) / lf2
+                    - kappa2 / (chi * lf2) * (delta - tf[i] * tf[j]) - (kb[i] * m1f[j] + m1f[i] * kb[j]) / (4.0 * lf2))
+            tee = -0.25 / le2 * (kb[i] * te_tt[j] + te_tt[i] * kb[j])
+            tff = -0.25 / lf2 * (kb[i] * tf_tt[j] + tf_tt[i] * kb[j])
+            # cross-product matrices [a]× have entries [a]×_ij = −ε_ijk a_k
+            x_d2t = _cross_matrix_entry(d2t, i, j)
+            x_d1t = _cross_matrix_entry(d1t, i, j)
+            x_te = _cross_matrix_entry(te, i, j)
+            k1ef = (-kappa1 / (chi * lelf) * (delta + te[i] * tf[j])
+                    + (2.0 * kappa1 * ttij - tf_x_d2t[i] * tt[j] + tt[i] * te_x_d2t[j] - x_d2t) / lelf)
+            k2ef = (-kappa2 / (chi * lelf) * (delta + te[i] * tf[j])
+                    + (2.0 * kappa2 * ttij + tf_x_d1t[i] * tt[j] - tt[i] * te_x_d1t[j] + x_d1t) / lelf)
+            tef = 0.5 / lelf * (2.0 / chi * x_te - kb[i] * tt[j])
+            cee[i, j] = w1 * k1ee + w2 * k2ee + w3 * tee
+            cff[i, j] = w1 * k1ff + w2 * k2ff + w3 * tff
+            cef[i, j] = w1 * k1ef + w2 * k2ef + w3 * tef
+    # mixed position–twist-angle derivatives (the twist's own are zero)
+    tf_x_m1e, tf_x_m1f, te_x_m1e, te_x_m1f = _cross(tf, m1e), _cross(tf, m1f), _cross(te, m1e), _cross(te, m1f)
+    tf_x_m2e, tf_x_m2f, te_x_m2e, te_x_m2f = _cross(tf, m2e), _cross(tf, m2f), _cross(te, m2e), _cross(te, m2f)
+    ce_the = _axpy(w1 / le, _axpy(0.5 * kb_m1e, tt, -1.0 / chi, tf_x_m1e),
+                   w2 / le, _axpy(0.5 * kb_m2e, tt, -1.0 / chi, tf_x_m2e))
+    ce_thf = _axpy(w1 / le, _axpy(0.5 * kb_m1f, tt, -1.0 / chi, tf_x_m1f),
+                   w2 / le, _axpy(0.5 * kb_m2f, tt, -1.0 / chi, tf_x_m2f))
+    cf_the = _axpy(w1 / lf, _axpy(0.5 * kb_m1e, tt, 1.0 / chi, te_x_m1e),
+                   w2 / lf, _axpy(0.5 * kb_m2e, tt, 1.0 / chi, te_x_m2e))
+    cf_thf = _axpy(w1 / lf, _axpy(0.5 * kb_m1f, tt, 1.0 / chi, te_x_m1f),
+                   w2 / lf, _axpy(0.5 * kb_m2f, tt, 1.0 / chi, te_x_m2f))
+    c_the2 = -0.5 * w1 * kb_m2e + 0.5 * w2 * kb_m1e
+    c_thf2 = -0.5 * w1 * kb_m2f + 0.5 * w2 * kb_m1f
+    # chain rule from the edges e = x_i − x_{i−1}, f = x_{i+1} − x_i to the stencil's nodes
+    for i in range(3):
+        for j in range(3):
+            ee, ff, ef, fe = cee[i, j], cff[i, j], cef[i, j], cef[j, i]
+            hess[i, j] = ee
+            hess[i, 4 + j] = -ee + ef
+            hess[i, 8 + j] = -ef
+            hess[4 + i, j] = -ee + fe
+            hess[4 + i, 4 + j] = ee - ef - fe + ff
+            hess[4 + i, 8 + j] = ef - ff
+            hess[8 + i, j] = -fe
+            hess[8 + i, 4 + j] = fe - ff
+            hess[8 + i, 8 + j] = ff
+        for col, ce, cf in ((3, ce_the, cf_the), (7, ce_thf, cf_thf)):
+            hess[i, col] = hess[col, i] = -ce[i]
+            hess[4 + i, col] = hess[col, 4 + i] = ce[i] - cf[i]
+            hess[8 + i, col] = hess[col, 8 + i] = cf[i]
+    hess[3, 3] = c_the2
+    hess[7, 7] = c_thf2
+    hess[3, 7] = hess[7, 3] = 0.0
+    for a in range(11):
+        for b in range(11):
+            hess[a, b] += eb * (g1[a] * g1[b] + g2[a] * g2[b]) + gj * gt[a] * gt[b]
     return energy
+
+
+@njit(cache=True)
+def _cross_matrix_entry(a, i, j):
+    """Entry (i, j) of the matrix [a]× with [a]×·b = a × b."""
+    if i == j:
+        return 0.0
+    k = 3 - i - j
+    sign = 1.0 if (j - i) % 3 == 1 else -1.0
+    return -sign * a[k]
 
 
 @njit(cache=True)
 def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
                   twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian):
-    """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 4) and ∇²E to ``band`` (R, 11, 4N).
+    """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 4) and ∇²E to ``band`` (R, 4N, 11).
 
     The start-of-step frames: ``tangent_old`` and ``director_old`` (R, N − 1, 3), ``ref_twist_old`` (R, N).
     """
@@ -238,46 +260,51 @@ def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stre
     energy = np.zeros(n_rods)
     tangent = np.empty((n_edges, 3))
     d1 = np.empty((n_edges, 3))
-    d2 = np.empty((n_edges, 3))
     m1 = np.empty((n_edges, 3))
     m2 = np.empty((n_edges, 3))
     ref_twist = np.empty(n_nodes)
     lengths = np.empty(n_edges)
     grad = np.empty(11)
     hess = np.empty((11, 11))
-    work = np.empty((11, 11))
+    vectors = np.empty((3, 11))
+    blocks = np.empty((3, 3, 3))
     stretch_hess = np.zeros((7, 7))
     for r in range(n_rods):
         qr = q[r]
-        rod_frames(qr, tangent_old[r], director_old[r], ref_twist_old[r], tangent, d1, d2, ref_twist, m1, m2)
+        rod_frames(qr, tangent_old[r], director_old[r], ref_twist_old[r], tangent, d1, ref_twist, m1, m2, lengths)
+        band_r = band[r]
         for e in range(n_edges):
-            d = qr[e + 1, :3] - qr[e, :3]
-            length = math.sqrt(np.dot(d, d))
-            lengths[e] = length
-            t = tangent[e]
+            length = lengths[e]
+            t = _row(tangent, e)
             l0 = rest_length[e]
             ea = stretch_stiffness[e]
             tension = ea * (length / l0 - 1.0)
             energy[r] += 0.5 * ea * l0 * (length / l0 - 1.0) ** 2
-            force[r, e, :3] += tension * t
-            force[r, e + 1, :3] -= tension * t
+            for k in range(3):
+                force[r, e, k] += tension * t[k]
+                force[r, e + 1, k] -= tension * t[k]
             if accumulate_hessian:
-                k = ea / l0 * np.outer(t, t) + tension / length * (np.eye(3) - np.outer(t, t))
-                stretch_hess[0:3, 0:3] = k
-                stretch_hess[4:7, 4:7] = k
-                stretch_hess[0:3, 4:7] = -k
-                stretch_hess[4:7, 0:3] = -k
-                scatter_contiguous(band[r], 4 * e, stretch_hess, 7)
+                axial = ea / l0
+                lateral = tension / length
+                for i in range(3):
+                    for j in range(3):
+                        kij = (axial - lateral) * t[i] * t[j] + (lateral if i == j else 0.0)
+                        stretch_hess[i, j] = kij
+                        stretch_hess[4 + i, 4 + j] = kij
+                        stretch_hess[i, 4 + j] = -kij
+                        stretch_hess[4 + i, j] = -kij
+                scatter_contiguous(band_r, 4 * e, stretch_hess, 7)
         for i in range(1, n_edges):
             e = i - 1
-            energy[r] += _bend_twist(tangent[e], tangent[i], lengths[e], lengths[i], m1[e], m2[e], m1[i], m2[i],
-                                     ref_twist[i], qr[e, 3], qr[i, 3], natural_curvature[r],
+            twist = qr[i, 3] - qr[e, 3] + ref_twist[i]
+            energy[r] += _bend_twist(_row(tangent, e), _row(tangent, i), lengths[e], lengths[i], _row(m1, e),
+                                     _row(m2, e), _row(m1, i), _row(m2, i), twist, natural_curvature[r],
                                      bend_stiffness[i] / voronoi_length[i], twist_stiffness[i] / voronoi_length[i],
-                                     grad, hess, work, accumulate_hessian)
+                                     grad, hess, vectors, blocks, accumulate_hessian)
             for a in range(11):
                 force[r, e + a // 4, a % 4] -= grad[a]
             if accumulate_hessian:
-                scatter_contiguous(band[r], 4 * e, hess, 11)
+                scatter_contiguous(band_r, 4 * e, hess, 11)
     return energy
 
 
@@ -285,9 +312,9 @@ def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stre
 def rod3d_update_frames(q, tangent_old, director_old, ref_twist_old, tangent, director, ref_twist):
     """Frames at the end of a step: writes ``tangent``, ``director`` (R, N − 1, 3) and ``ref_twist`` (R, N)."""
     n_rods, n_nodes = q.shape[0], q.shape[1]
-    d2 = np.empty((n_nodes - 1, 3))
     m1 = np.empty((n_nodes - 1, 3))
     m2 = np.empty((n_nodes - 1, 3))
+    lengths = np.empty(n_nodes - 1)
     for r in range(n_rods):
-        rod_frames(q[r], tangent_old[r], director_old[r], ref_twist_old[r], tangent[r], director[r], d2,
-                   ref_twist[r], m1, m2)
+        rod_frames(q[r], tangent_old[r], director_old[r], ref_twist_old[r], tangent[r], director[r], ref_twist[r],
+                   m1, m2, lengths)

@@ -28,16 +28,10 @@ import math
 import numpy as np
 from numba import njit
 
+from .linalg import scatter_contiguous
+
 
 @njit(cache=True, inline="always")
-def scatter_contiguous(band, offset, hessian, m):
-    """Add the symmetric m×m ``hessian`` of DOFs offset … offset+m−1 into lower band storage (kd+1, n)."""
-    for a in range(m):
-        for b in range(a + 1):
-            band[a - b, offset + b] += hessian[a, b]
-
-
-@njit(cache=True)
 def _stretch(q, r, i, rest_length, stretch_stiffness, force, band, hessian, accumulate_hessian):
     """Stretch energy of edge i of rod r; adds force and Hessian (DOFs of nodes i, i+1)."""
     ex = q[r, i + 1, 0] - q[r, i, 0]
@@ -70,7 +64,7 @@ def _stretch(q, r, i, rest_length, stretch_stiffness, force, band, hessian, accu
     return energy
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, grad_phi, hess_phi, hessian,
           accumulate_hessian):
     """Bending energy at interior node i of rod r; adds force and Hessian (DOFs of nodes i−1, i, i+1)."""
@@ -78,10 +72,9 @@ def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, grad_
     ez = q[r, i, 1] - q[r, i - 1, 1]
     fx = q[r, i + 1, 0] - q[r, i, 0]
     fz = q[r, i + 1, 1] - q[r, i, 1]
-    phi = math.atan2(ex * fz - ez * fx, ex * fx + ez * fz)
-    kappa = 2.0 * math.tan(0.5 * phi)
     e2 = ex * ex + ez * ez
     f2 = fx * fx + fz * fz
+    kappa = 2.0 * (ex * fz - ez * fx) / (math.sqrt(e2 * f2) + ex * fx + ez * fz)  # 2·tan(φ/2)
     # ∂θ/∂e = (−e_z, e_s)/|e|²
     gex, gez = -ez / e2, ex / e2
     gfx, gfz = -fz / f2, fx / f2
@@ -126,7 +119,7 @@ def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, grad_
 @njit(cache=True)
 def planar_elastic(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_length, natural_curvature,
                    force, band, accumulate_hessian):
-    """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 2) and ∇²E to ``band`` (R, 6, 2N).
+    """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 2) and ∇²E to ``band`` (R, 2N, 6).
 
     ``natural_curvature`` holds κ̄ per rod, (R,).
     """

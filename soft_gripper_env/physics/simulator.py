@@ -22,7 +22,7 @@ import numpy as np
 
 from .config import Scene
 from .discretization import Discretization
-from .linalg import solve_banded_symmetric
+from .linalg import newton_iteration
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
 
@@ -74,6 +74,7 @@ class Simulator:
         self.scene = scene
         self.batch_size = int(batch_size)
         self.disc = Discretization.from_scene(scene)
+        self._tolerance_inverse = np.where(self.disc.free, 1.0 / self.disc.residual_scale, 0.0)
 
     @property
     def n_fingers(self) -> int:
@@ -154,10 +155,6 @@ class Simulator:
         ratio = np.max(np.abs(force.reshape(R, -1)) * self._tolerance_inverse, axis=1)
         return ratio.reshape(self.batch_size, self.n_fingers).max(axis=1)
 
-    @property
-    def _tolerance_inverse(self) -> np.ndarray:
-        return np.where(self.disc.free, 1.0 / self.disc.residual_scale, 0.0)
-
     def _frames(self, state: RodState):
         if self.disc.model != "3d":
             return None
@@ -166,11 +163,11 @@ class Simulator:
                 state.reference_twist.reshape(R, N))
 
     def _assemble(self, q, q_old, frames_old, kbar, time, velocity_derivative, hessian=True):
-        """Total force [N] on every DOF (R, N, S) and the lower band of −∂f/∂q (R, kd+1, n) at coordinates q."""
+        """Total force [N] on every DOF (R, N, S) and the band of −∂f/∂q (R, n, kd+1) at coordinates q."""
         disc = self.disc
         R, N, S, D = q.shape[0], disc.n_nodes, disc.stride, disc.dim
         force = np.zeros((R, N, S))
-        band = np.zeros((R, disc.band_width + 1, N * S))
+        band = np.zeros((R, N * S, disc.band_width + 1))
         if frames_old is None:
             planar_elastic(q, disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness,
                            disc.voronoi_length, kbar, force, band, hessian)
@@ -199,21 +196,12 @@ class Simulator:
         iterations = np.zeros(R, dtype=np.int64)
         ratio = np.full(R, np.inf)
         max_iterations = scene.newton.max_iterations
+        q_flat, q_pred_flat = q.reshape(R, n), q_pred.reshape(R, n)
         for it in range(max_iterations + 1):
             force, band = self._assemble(q, q_old, frames_old, kbar, state.time, velocity_derivative)
-            residual = mass_term * (q - q_pred).reshape(R, n) - force.reshape(R, n)
-            band[:, 0, :] += mass_term
-            ratio_now = np.max(np.abs(residual) * tolerance_inverse, axis=1)
-            ratio = np.where(active, ratio_now, ratio)
-            done = active & (ratio_now <= 1.0)
-            converged |= done
-            active &= ~done
-            if not active.any() or it == max_iterations:
+            if not newton_iteration(q_flat, q_pred_flat, force.reshape(R, n), band, mass_term, tolerance_inverse,
+                                    disc.free, active, converged, iterations, ratio, it < max_iterations):
                 break
-            rhs = -residual
-            solve_banded_symmetric(band, rhs, disc.free, active)
-            q[active] += rhs[active].reshape(-1, N, S)
-            iterations[active] += 1
 
         new_state = RodState(q=q.reshape(state.q.shape), velocity=((q - q_old) / dt).reshape(state.q.shape),
                              time=state.time + dt)
@@ -227,7 +215,7 @@ class Simulator:
                                 director=director.reshape(shape[:2] + (N - 1, 3)),
                                 reference_twist=reference_twist.reshape(shape))
         B, F = self.batch_size, self.n_fingers
-        ratio = np.where(np.isfinite(ratio), ratio, np.inf)
+        ratio = np.where(np.isnan(ratio), np.inf, ratio)
         return StepResult(state=new_state, converged=converged.reshape(B, F).all(axis=1),
                           newton_iterations=iterations.reshape(B, F).max(axis=1),
                           residual=ratio.reshape(B, F).max(axis=1))

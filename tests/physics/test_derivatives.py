@@ -12,11 +12,12 @@ from soft_gripper_env.physics.rod_planar import planar_elastic
 
 
 def band_to_dense(band):
-    kd1, n = band.shape
+    n, kd1 = band.shape
+    kd = kd1 - 1
     dense = np.zeros((n, n))
-    for k in range(kd1):
-        for j in range(n - k):
-            dense[j + k, j] = dense[j, j + k] = band[k, j]
+    for i in range(n):
+        for j in range(max(0, i - kd), i + 1):
+            dense[i, j] = dense[j, i] = band[i, kd - (i - j)]
     return dense
 
 
@@ -38,7 +39,7 @@ class PlanarRod:
     def evaluate(self, q, hessian=True):
         p = self.p
         force = np.zeros_like(q)
-        band = np.zeros((1, 6, q.size))
+        band = np.zeros((1, q.size, 6))
         energy = planar_elastic(q, p["rest"], p["ea"], p["ei"], p["voronoi"], self.kappa_bar, force, band, hessian)
         return energy[0], -force.ravel(), band_to_dense(band[0])
 
@@ -70,7 +71,7 @@ class Rod3D:
     def evaluate(self, q, hessian=True):
         p = self.p
         force = np.zeros_like(q)
-        band = np.zeros((1, 11, q.size))
+        band = np.zeros((1, q.size, 11))
         energy = rod3d_elastic(q, self.tangent, self.director, self.ref_twist, p["rest"], p["ea"], p["ei"], p["gj"],
                                p["voronoi"], self.kappa_bar, force, band, hessian)
         return energy[0], -force.ravel(), band_to_dense(band[0])
@@ -150,7 +151,7 @@ def test_velocity_force_jacobian(model, force_model):
 
     def force_and_band(q):
         force = np.zeros((1, N, S))
-        band = np.zeros((1, disc.band_width + 1, N * S))
+        band = np.zeros((1, N * S, disc.band_width + 1))
         v = (q - q_old) / dt
         force_model.accumulate(disc, q[..., :D], v[..., :D], 0.0, force[..., :D], band, 1.0 / dt)
         return force.ravel(), band_to_dense(band[0])
@@ -169,9 +170,39 @@ def test_velocity_force_jacobian(model, force_model):
 def test_gravity_only_has_no_jacobian_and_pulls_down():
     disc = Discretization.from_scene(cantilever_scene())
     force = np.zeros((1, disc.n_nodes, disc.stride))
-    band = np.zeros((1, disc.band_width + 1, disc.n_dofs))
+    band = np.zeros((1, disc.n_dofs, disc.band_width + 1))
     for model in cantilever_scene().forces:
         model.accumulate(disc, None, None, 0.0, force, band, 100.0)
     assert not band.any()
     np.testing.assert_allclose(force[0, :, 1], -disc.node_mass * 9.81)
     np.testing.assert_allclose(force[0, :, 0], 0.0)
+
+
+@pytest.mark.parametrize("n, kd", [(12, 5), (40, 10)])
+def test_banded_solver_matches_dense_solve(n, kd):
+    from soft_gripper_env.physics.linalg import solve_banded_symmetric_rod
+
+    rng = np.random.default_rng(n)
+    dense = np.zeros((n, n))
+    for k in range(kd + 1):
+        values = rng.normal(size=n - k) * (0.3 if k else 1.0)
+        dense += np.diag(values, -k) + (np.diag(values, k) if k else 0)
+    dense += np.diag(np.full(n, 2.0 * kd))  # diagonally dominant but with mixed-sign entries
+    band = np.zeros((n, kd + 1))
+    for i in range(n):
+        for j in range(max(0, i - kd), i + 1):
+            band[i, kd - (i - j)] = dense[i, j]
+    free = np.ones(n, dtype=bool)
+    free[[0, 3, n - 1]] = False
+    rhs = rng.normal(size=n)
+    x = rhs.copy()
+    assert solve_banded_symmetric_rod(band.copy(), x, free)
+    reduced = dense[np.ix_(free, free)]
+    expected = np.zeros(n)
+    expected[free] = np.linalg.solve(reduced, rhs[free])
+    np.testing.assert_allclose(x, expected, rtol=1e-12, atol=1e-12)
+    assert band_to_dense(band) == pytest.approx(dense)
+    singular = np.zeros((n, kd + 1))
+    x = rhs.copy()
+    assert not solve_banded_symmetric_rod(singular, x, free)
+    assert np.isnan(x).all()

@@ -1,0 +1,123 @@
+"""Speed of the physics core, single-threaded: the paper's whole run, and batched planar throughput.
+
+    python benchmarks/core_speed.py [--json PATH] [--plot PATH] [--repeats 5]
+
+The paper-scene run is 3 fingers × 100 steps of 0.01 s with N = 20 (backward Euler, Newton to 1e-6·EI/L²),
+timed whole, best of ``--repeats`` after a warm-up (compilation excluded). Batched throughput steps B planar
+grippers of the same scene together for 20 steps of the ramp and reports µs per gripper-step. Goals from issue 2:
+planar run ≤ 30 ms, 3-D run ≤ 100 ms, batched planar ≤ 50 µs per gripper-step at B ≥ 64.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from soft_gripper_env.physics import Simulator, paper_scene, run_ramp  # noqa: E402
+
+BATCH_SIZES = (1, 16, 64, 256)
+GOALS = {"planar": 0.030, "3d": 0.100, "batched_us": 50.0}
+
+
+def time_paper_run(model: str, repeats: int) -> float:
+    scene = paper_scene(model)
+    run_ramp(scene)  # compile / warm up
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        run_ramp(scene)
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def time_batched(batch_size: int, repeats: int, n_steps: int = 20) -> float:
+    """µs per gripper-step of the planar paper scene stepped as one batch."""
+    scene = paper_scene("planar")
+    sim = Simulator(scene, batch_size)
+    best = float("inf")
+    for _ in range(repeats + 1):  # the first pass warms up
+        state = sim.initial_state()
+        start = time.perf_counter()
+        for _ in range(n_steps):
+            state = sim.step(state, scene.natural_curvature_rate * state.time).state
+        best = min(best, time.perf_counter() - start)
+    return best / (n_steps * batch_size) * 1e6
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--json", type=Path, help="write the results to this JSON file")
+    parser.add_argument("--plot", type=Path, default=Path("out/core_speed.png"), help="plot path (PNG)")
+    parser.add_argument("--repeats", type=int, default=5, help="timed repetitions; the best counts (default 5)")
+    args = parser.parse_args(argv)
+    if args.repeats < 1:
+        parser.error(f"--repeats = {args.repeats} must be at least 1")
+
+    print("timing the paper scene (3 fingers, 100 steps, N = 20), single-threaded ...", flush=True)
+    planar_s = time_paper_run("planar", args.repeats)
+    spatial_s = time_paper_run("3d", args.repeats)
+    batched = {}
+    for b in BATCH_SIZES:
+        print(f"timing batched planar, B = {b} ...", flush=True)
+        batched[str(b)] = time_batched(b, args.repeats)
+
+    print()
+    print(f"{'measurement':<40}{'value':>12}{'goal':>12}{'goal / value':>14}")
+    rows = [("paper scene, planar [ms]", planar_s * 1e3, GOALS["planar"] * 1e3),
+            ("paper scene, 3-D [ms]", spatial_s * 1e3, GOALS["3d"] * 1e3)]
+    rows += [(f"batched planar, B = {b} [µs/gripper-step]", us, GOALS["batched_us"] if int(b) >= 64 else None)
+             for b, us in batched.items()]
+    for label, value, goal in rows:
+        goal_text = f"{goal:12.1f}{goal / value:13.2f}×" if goal else f"{'—':>12}{'—':>14}"
+        print(f"{label:<40}{value:12.2f}{goal_text}")
+    paper_code_s = 31.0
+    print(f"\nspeed-up over the paper's own code (about {paper_code_s:.0f} s for this run on these machines): "
+          f"planar {paper_code_s / planar_s:,.0f}×, 3-D {paper_code_s / spatial_s:,.0f}×")
+
+    results = {"seed_scene_planar_s": planar_s, "seed_scene_3d_s": spatial_s,
+               "batched_planar_us_per_gripper_step": batched}
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        print(f"wrote {args.json}")
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11, 4.2))
+    names = ["planar", "3-D"]
+    values = [planar_s * 1e3, spatial_s * 1e3]
+    goals = [GOALS["planar"] * 1e3, GOALS["3d"] * 1e3]
+    bars = ax0.bar(names, values, color=["tab:blue", "tab:orange"])
+    ax0.scatter(names, goals, marker="_", s=900, color="k", zorder=3, label="goal")
+    ax0.bar_label(bars, fmt="%.1f ms")
+    ax0.set_ylabel("wall time of the whole run [ms]")
+    ax0.set_title("paper scene: 3 fingers, 100 steps, N = 20")
+    ax0.legend()
+    sizes = [int(b) for b in batched]
+    ax1.loglog(sizes, list(batched.values()), "o-", label="planar, batched")
+    ax1.axhline(GOALS["batched_us"], color="k", ls="--", label="goal at B ≥ 64")
+    ax1.set_xlabel("batch size B [grippers]")
+    ax1.set_ylabel("µs per gripper-step")
+    ax1.set_title("batched planar throughput (one core)")
+    ax1.grid(True, which="both", alpha=0.3)
+    ax1.legend()
+    fig.tight_layout()
+    args.plot.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.plot, dpi=110)
+    print(f"wrote {args.plot}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
