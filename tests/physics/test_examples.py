@@ -1,0 +1,71 @@
+"""The example and benchmark scripts run as users call them, and write what they promise."""
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from soft_gripper_env.physics import paper_scene, run_ramp
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def run_script(*args, timeout=600):
+    out = subprocess.run([sys.executable, *map(str, args)], cwd=ROOT, capture_output=True, text=True,
+                         timeout=timeout)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
+def test_reproduce_paper_writes_png_and_tip_csv(tmp_path):
+    stdout = run_script("examples/reproduce_paper.py", "--out", tmp_path, "--model", "planar", "--case", "fig5",
+                        "fig12")
+    assert "[2/2] fig12" in stdout
+    for name in ("fig5.png", "fig12.png", "fig12_soft_translucent.csv"):
+        assert (tmp_path / name).stat().st_size > 0
+    with open(tmp_path / "fig5.csv") as handle:
+        rows = list(csv.reader(handle))
+    assert rows[0] == ["time_s", "tip_x_m", "tip_y_m", "tip_z_m"]
+    data = np.array(rows[1:], dtype=float)
+    assert data.shape == (100, 4)
+    np.testing.assert_allclose(data[:, 0], 0.01 * np.arange(1, 101))  # the state after each step
+    expected = run_ramp(paper_scene("planar")).positions[1:, 0, 0, -1]
+    np.testing.assert_allclose(data[:, 1:], expected, rtol=1e-8, atol=1e-12)
+    assert (tmp_path / "fig5.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_reproduce_paper_rejects_unknown_case(tmp_path):
+    out = subprocess.run([sys.executable, "examples/reproduce_paper.py", "--out", str(tmp_path), "--case", "fig99"],
+                         cwd=ROOT, capture_output=True, text=True)
+    assert out.returncode == 2 and "invalid choice: 'fig99'" in out.stderr
+
+
+def test_cantilever_json(tmp_path):
+    path = tmp_path / "c.json"
+    stdout = run_script("examples/cantilever.py", "--nodes", "20", "--clamp", "accurate", "--json", path)
+    result = json.loads(path.read_text())
+    assert result["exact_tip_z_m"] == pytest.approx(-14.95e-3, abs=0.01e-3)
+    assert abs(result["tip_z_m"] / result["exact_tip_z_m"] - 1) < 0.01
+    assert "exact elastica" in stdout
+
+
+def test_cantilever_rejects_bad_node_count():
+    out = subprocess.run([sys.executable, "examples/cantilever.py", "--nodes", "3"], cwd=ROOT, capture_output=True,
+                         text=True)
+    assert out.returncode == 2 and "FingerDesign.n_nodes = 3" in out.stderr
+
+
+@pytest.mark.slow
+def test_core_speed_benchmark_writes_json_and_plot(tmp_path):
+    stdout = run_script("benchmarks/core_speed.py", "--repeats", "1", "--json", tmp_path / "s.json", "--plot",
+                        tmp_path / "s.png")
+    result = json.loads((tmp_path / "s.json").read_text())
+    assert set(result) == {"seed_scene_planar_s", "seed_scene_3d_s", "batched_planar_us_per_gripper_step"}
+    assert set(result["batched_planar_us_per_gripper_step"]) == {"1", "16", "64", "256"}
+    assert all(v > 0 for v in result["batched_planar_us_per_gripper_step"].values())
+    assert (tmp_path / "s.png").stat().st_size > 0
+    assert "goal / value" in stdout
