@@ -17,8 +17,14 @@ from dataclasses import replace
 from functools import cache
 from pathlib import Path
 
-from soft_gripper_env.physics import (ELASTOSIL_MA_4601, PAPER_DEFECTIVE_DRAG, SOFT_TRANSLUCENT_SILICONE, Trajectory,
-                                      paper_scene, run_ramp)
+from soft_gripper_env.physics import (
+    ELASTOSIL_MA_4601,
+    PAPER_DEFECTIVE_DRAG,
+    SOFT_TRANSLUCENT_SILICONE,
+    Trajectory,
+    paper_scene,
+    run_ramp,
+)
 from soft_gripper_env.plotting import new_figure, plot_timelapse, plot_tip_height, save
 
 CASES = ("fig5", "fig6", "fig7", "fig8", "fig9", "fig12")
@@ -30,7 +36,7 @@ def write_tip_csv(path: Path, trajectory: Trajectory) -> None:
     with open(path, "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["time_s", "tip_x_m", "tip_y_m", "tip_z_m"])
-        for t, tip in zip(trajectory.times[1:], trajectory.positions[1:, 0, 0, -1]):
+        for t, tip in zip(trajectory.times[1:], trajectory.positions[1:, 0, 0, -1], strict=True):
             writer.writerow([f"{t:.6g}", f"{tip[0]:.9e}", f"{tip[1]:.9e}", f"{tip[2]:.9e}"])
 
 
@@ -89,7 +95,7 @@ def run_case(case: str, model: str, out: Path) -> dict[str, Trajectory]:
         runs = {"Elastosil MA 4601": base,
                 "Soft Translucent": run_ramp(paper_scene(model, material=SOFT_TRANSLUCENT_SILICONE))}
         fig, axes = new_figure(2)
-        for ax, (label, run) in zip(axes, runs.items()):
+        for ax, (label, run) in zip(axes, runs.items(), strict=True):
             plot_tip_height(ax, run, label)
             ax.set_title(f"Fig. 12: {label}")
         write_tip_csv(out / "fig12_soft_translucent.csv", runs["Soft Translucent"])

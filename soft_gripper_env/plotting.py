@@ -25,7 +25,7 @@ def plot_timelapse(ax, trajectory: Trajectory, every: float = 0.1) -> None:
     stride = max(1, int(round(every / dt)))
     frames = range(0, len(trajectory.times), stride)
     colours = plt.cm.viridis(np.linspace(0.9, 0.0, len(frames)))
-    for colour, k in zip(colours, frames):
+    for colour, k in zip(colours, frames, strict=True):
         for finger in trajectory.positions[k, 0]:
             ax.plot(finger[:, 0], finger[:, 1], finger[:, 2], color=colour, lw=1.6)
             ax.scatter(*finger[-1], color=colour, s=6)

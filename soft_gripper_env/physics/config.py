@@ -247,5 +247,5 @@ def cantilever_scene(n_nodes: int = 20, clamp: ClampConvention = "accurate", mod
 
 
 __all__ = ["Material", "FingerDesign", "GripperDesign", "NewtonSettings", "Scene", "ELASTOSIL_MA_4601",
-           "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "PAPER_DEFECTIVE_DRAG", "linear_taper", "paper_finger", "paper_scene",
-           "cantilever_scene", "check_range", "replace"]
+           "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "PAPER_DEFECTIVE_DRAG", "linear_taper", "paper_finger",
+           "paper_scene", "cantilever_scene", "check_range", "replace"]

@@ -76,7 +76,7 @@ class Discretization:
         return self.n_nodes * self.stride
 
     def add_to_position_diagonal(self, system_band: np.ndarray, values: np.ndarray) -> None:
-        """Add ``values`` (N, D) or (R, N, D) to the diagonal entries of the position DOFs of ``system_band``."""
+        """Add ``values`` (broadcastable to (R, N, D)) to the diagonal of the position DOFs in ``system_band``."""
         # copy=False: a reshape that needed a copy would silently drop the update, so it must fail instead
         diagonal = band_diagonal(system_band).reshape(system_band.shape[0], self.n_nodes, self.stride, copy=False)
         diagonal[..., : self.dim] += values

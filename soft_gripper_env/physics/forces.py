@@ -129,9 +129,9 @@ class MassProportionalDamping(ForceModel):
 def _add_linear_damping(disc: Discretization, coefficient: np.ndarray, velocities: np.ndarray, force: np.ndarray,
                         system_band: np.ndarray, velocity_derivative: float) -> None:
     """f = −c_i·v_i per node, isotropic; Jacobian −c_i·∂v/∂q on the diagonal."""
-    force -= coefficient[:, None] * velocities
-    disc.add_to_position_diagonal(system_band, np.broadcast_to((coefficient * velocity_derivative)[:, None],
-                                                               velocities.shape[1:]))
+    column = coefficient[:, None]
+    force -= column * velocities
+    disc.add_to_position_diagonal(system_band, column * velocity_derivative)
 
 
 __all__ = ["ForceModel", "Gravity", "Buoyancy", "StokesDrag", "MassProportionalDamping"]

@@ -35,7 +35,6 @@ from numba import njit
 
 from .linalg import scatter_contiguous
 
-
 # 3-vectors are tuples: value types that Numba keeps in registers, so the kernel allocates nothing per node.
 
 

@@ -28,11 +28,9 @@ import math
 import numpy as np
 from numba import njit
 
-from .linalg import scatter_contiguous
-
 
 @njit(cache=True, inline="always")
-def _stretch(q, r, i, rest_length, stretch_stiffness, force, band, hessian, accumulate_hessian):
+def _stretch(q, r, i, rest_length, stretch_stiffness, force, band, accumulate_hessian):
     """Stretch energy of edge i of rod r; adds force and Hessian (DOFs of nodes i, i+1)."""
     ex = q[r, i + 1, 0] - q[r, i, 0]
     ez = q[r, i + 1, 1] - q[r, i, 1]
@@ -53,20 +51,25 @@ def _stretch(q, r, i, rest_length, stretch_stiffness, force, band, hessian, accu
         kxx = axial * tx * tx + lateral * (1.0 - tx * tx)
         kxz = (axial - lateral) * tx * tz
         kzz = axial * tz * tz + lateral * (1.0 - tz * tz)
-        for a in range(2):
-            for b in range(2):
-                sign = 1.0 if a == b else -1.0
-                hessian[2 * a, 2 * b] = sign * kxx
-                hessian[2 * a, 2 * b + 1] = sign * kxz
-                hessian[2 * a + 1, 2 * b] = sign * kxz
-                hessian[2 * a + 1, 2 * b + 1] = sign * kzz
-        scatter_contiguous(band[r], 2 * i, hessian, 4)
+        band_r = band[r]
+        kd = band_r.shape[1] - 1
+        o = 2 * i
+        # lower triangle of [[K, −K], [−K, K]] over (s, z) of nodes i, i+1
+        band_r[o, kd] += kxx
+        band_r[o + 1, kd - 1] += kxz
+        band_r[o + 1, kd] += kzz
+        band_r[o + 2, kd - 2] -= kxx
+        band_r[o + 2, kd - 1] -= kxz
+        band_r[o + 2, kd] += kxx
+        band_r[o + 3, kd - 3] -= kxz
+        band_r[o + 3, kd - 2] -= kzz
+        band_r[o + 3, kd - 1] += kxz
+        band_r[o + 3, kd] += kzz
     return energy
 
 
 @njit(cache=True, inline="always")
-def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, grad_phi, hess_phi, hessian,
-          accumulate_hessian):
+def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accumulate_hessian):
     """Bending energy at interior node i of rod r; adds force and Hessian (DOFs of nodes i−1, i, i+1)."""
     ex = q[r, i, 0] - q[r, i - 1, 0]
     ez = q[r, i, 1] - q[r, i - 1, 1]
@@ -78,41 +81,52 @@ def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, grad_
     # ∂θ/∂e = (−e_z, e_s)/|e|²
     gex, gez = -ez / e2, ex / e2
     gfx, gfz = -fz / f2, fx / f2
-    grad_phi[0], grad_phi[1] = gex, gez
-    grad_phi[2], grad_phi[3] = -gex - gfx, -gez - gfz
-    grad_phi[4], grad_phi[5] = gfx, gfz
+    gp0, gp1, gp2, gp3, gp4, gp5 = gex, gez, -gex - gfx, -gez - gfz, gfx, gfz  # ∇φ over the stencil
     k = bend_stiffness[i] / voronoi_length[i]
     dk = kappa - kappa_bar
     dkappa = 1.0 + 0.25 * kappa * kappa  # dκ/dφ
     energy = 0.5 * k * dk * dk
     g = k * dk * dkappa
-    for a in range(3):
-        force[r, i - 1 + a, 0] -= g * grad_phi[2 * a]
-        force[r, i - 1 + a, 1] -= g * grad_phi[2 * a + 1]
+    force[r, i - 1, 0] -= g * gp0
+    force[r, i - 1, 1] -= g * gp1
+    force[r, i, 0] -= g * gp2
+    force[r, i, 1] -= g * gp3
+    force[r, i + 1, 0] -= g * gp4
+    force[r, i + 1, 1] -= g * gp5
     if accumulate_hessian:
-        # ∂²θ/∂e² = [[2 e_s e_z, e_z² − e_s²], [e_z² − e_s², −2 e_s e_z]]/|e|⁴; φ = θ(f) − θ(e)
-        hess_phi[:, :] = 0.0
+        # ∂²θ/∂e² = [[2 e_s e_z, e_z² − e_s²], [e_z² − e_s², −2 e_s e_z]]/|e|⁴, stored as (ss, sz, zz);
+        # φ = θ(f) − θ(e) couples nodes (0, 1) through e and (1, 2) through f.
         e4 = e2 * e2
         f4 = f2 * f2
-        he = (2.0 * ex * ez / e4, (ez * ez - ex * ex) / e4, -2.0 * ex * ez / e4)  # (ss, sz, zz)
-        hf = (2.0 * fx * fz / f4, (fz * fz - fx * fx) / f4, -2.0 * fx * fz / f4)
-        for a in range(2):
-            for b in range(2):
-                hea = he[a + b]
-                hfa = hf[a + b]
-                hess_phi[a, b] -= hea
-                hess_phi[a, 2 + b] += hea
-                hess_phi[2 + a, b] += hea
-                hess_phi[2 + a, 2 + b] += hfa - hea
-                hess_phi[2 + a, 4 + b] -= hfa
-                hess_phi[4 + a, 2 + b] -= hfa
-                hess_phi[4 + a, 4 + b] += hfa
+        he0, he1, he2 = 2.0 * ex * ez / e4, (ez * ez - ex * ex) / e4, -2.0 * ex * ez / e4
+        hf0, hf1, hf2 = 2.0 * fx * fz / f4, (fz * fz - fx * fx) / f4, -2.0 * fx * fz / f4
         d2kappa = 0.5 * kappa * dkappa  # d²κ/dφ²
         outer_coeff = k * (dkappa * dkappa + dk * d2kappa)
-        for a in range(6):
-            for b in range(6):
-                hessian[a, b] = outer_coeff * grad_phi[a] * grad_phi[b] + g * hess_phi[a, b]
-        scatter_contiguous(band[r], 2 * (i - 1), hessian, 6)
+        band_r = band[r]
+        kd = band_r.shape[1] - 1
+        offset = 2 * (i - 1)
+        # lower triangle of outer_coeff·∇φ∇φᵀ + g·∇²φ, row a, column b ≤ a, over (s, z) of nodes i−1, i, i+1
+        band_r[offset + 0, kd - 0] += outer_coeff * gp0 * gp0 + g * (-he0)
+        band_r[offset + 1, kd - 1] += outer_coeff * gp1 * gp0 + g * (-he1)
+        band_r[offset + 1, kd - 0] += outer_coeff * gp1 * gp1 + g * (-he2)
+        band_r[offset + 2, kd - 2] += outer_coeff * gp2 * gp0 + g * (he0)
+        band_r[offset + 2, kd - 1] += outer_coeff * gp2 * gp1 + g * (he1)
+        band_r[offset + 2, kd - 0] += outer_coeff * gp2 * gp2 + g * (hf0 - he0)
+        band_r[offset + 3, kd - 3] += outer_coeff * gp3 * gp0 + g * (he1)
+        band_r[offset + 3, kd - 2] += outer_coeff * gp3 * gp1 + g * (he2)
+        band_r[offset + 3, kd - 1] += outer_coeff * gp3 * gp2 + g * (hf1 - he1)
+        band_r[offset + 3, kd - 0] += outer_coeff * gp3 * gp3 + g * (hf2 - he2)
+        band_r[offset + 4, kd - 4] += outer_coeff * gp4 * gp0
+        band_r[offset + 4, kd - 3] += outer_coeff * gp4 * gp1
+        band_r[offset + 4, kd - 2] += outer_coeff * gp4 * gp2 + g * (-hf0)
+        band_r[offset + 4, kd - 1] += outer_coeff * gp4 * gp3 + g * (-hf1)
+        band_r[offset + 4, kd - 0] += outer_coeff * gp4 * gp4 + g * (hf0)
+        band_r[offset + 5, kd - 5] += outer_coeff * gp5 * gp0
+        band_r[offset + 5, kd - 4] += outer_coeff * gp5 * gp1
+        band_r[offset + 5, kd - 3] += outer_coeff * gp5 * gp2 + g * (-hf1)
+        band_r[offset + 5, kd - 2] += outer_coeff * gp5 * gp3 + g * (-hf2)
+        band_r[offset + 5, kd - 1] += outer_coeff * gp5 * gp4 + g * (hf1)
+        band_r[offset + 5, kd - 0] += outer_coeff * gp5 * gp5 + g * (hf2)
     return energy
 
 
@@ -125,15 +139,12 @@ def planar_elastic(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_le
     """
     n_rods, n_nodes = q.shape[0], q.shape[1]
     energy = np.zeros(n_rods)
-    grad_phi = np.empty(6)
-    hess_phi = np.empty((6, 6))
-    hessian = np.empty((6, 6))
     for r in range(n_rods):
         for i in range(n_nodes - 1):
-            energy[r] += _stretch(q, r, i, rest_length, stretch_stiffness, force, band, hessian, accumulate_hessian)
+            energy[r] += _stretch(q, r, i, rest_length, stretch_stiffness, force, band, accumulate_hessian)
         for i in range(1, n_nodes - 1):
             energy[r] += _bend(q, r, i, bend_stiffness, voronoi_length, natural_curvature[r], force, band,
-                               grad_phi, hess_phi, hessian, accumulate_hessian)
+                               accumulate_hessian)
     return energy
 
 

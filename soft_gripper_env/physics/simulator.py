@@ -41,6 +41,9 @@ class RodState:
     velocity: np.ndarray
     time: float
     """Simulated time [s]."""
+    acceleration: np.ndarray | None = None
+    """Mean acceleration over the last step, (v − v_old)/Δt, (B, F, N, S) [m/s²]; None before the first step.
+    It only improves Newton's starting guess."""
     tangent: np.ndarray | None = None
     director: np.ndarray | None = None
     reference_twist: np.ndarray | None = None
@@ -138,7 +141,7 @@ class Simulator:
             if not np.all(result.converged):
                 pseudo_step *= 0.25
                 continue
-            state = replace(result.state, velocity=zero, time=state.time)
+            state = replace(result.state, velocity=zero, time=state.time, acceleration=None)
             static = self.static_residual(state, kbar)
             if np.all(static <= 1.0):
                 return replace(result, state=state, residual=static)
@@ -182,11 +185,13 @@ class Simulator:
     def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
         disc = self.disc
         scene = self.scene
-        R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
+        R, N, S = self.n_rods, disc.n_nodes, disc.stride
         n = N * S
         q_old = state.q.reshape(R, N, S)
         q_pred = q_old + dt * velocity_old.reshape(R, N, S)
         q = q_pred.copy()
+        if state.acceleration is not None and velocity_old is state.velocity:
+            q += dt * dt * state.acceleration.reshape(R, N, S)  # start from the extrapolated motion
         frames_old = self._frames(state)
         mass_term = disc.dof_mass / dt**2
         velocity_derivative = 1.0 / dt
@@ -203,8 +208,9 @@ class Simulator:
                                     disc.free, active, converged, iterations, ratio, it < max_iterations):
                 break
 
-        new_state = RodState(q=q.reshape(state.q.shape), velocity=((q - q_old) / dt).reshape(state.q.shape),
-                             time=state.time + dt)
+        velocity = ((q - q_old) / dt).reshape(state.q.shape)
+        new_state = RodState(q=q.reshape(state.q.shape), velocity=velocity, time=state.time + dt,
+                             acceleration=(velocity - velocity_old) / dt)
         if disc.model == "3d":
             tangent = np.empty((R, N - 1, 3))
             director = np.empty((R, N - 1, 3))

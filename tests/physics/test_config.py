@@ -3,8 +3,18 @@
 import numpy as np
 import pytest
 
-from soft_gripper_env.physics import (ELASTOSIL_MA_4601, FingerDesign, GripperDesign, Material, NewtonSettings,
-                                      Scene, Simulator, StokesDrag, paper_finger, paper_scene)
+from soft_gripper_env.physics import (
+    ELASTOSIL_MA_4601,
+    FingerDesign,
+    GripperDesign,
+    Material,
+    NewtonSettings,
+    Scene,
+    Simulator,
+    StokesDrag,
+    paper_finger,
+    paper_scene,
+)
 from soft_gripper_env.physics.config import replace
 from soft_gripper_env.physics.forces import Buoyancy, Gravity, MassProportionalDamping
 

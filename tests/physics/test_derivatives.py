@@ -4,8 +4,14 @@ and of the force models' Jacobians."""
 import numpy as np
 import pytest
 
-from soft_gripper_env.physics import (Discretization, MassProportionalDamping, Scene, StokesDrag, cantilever_scene,
-                                      paper_finger)
+from soft_gripper_env.physics import (
+    Discretization,
+    MassProportionalDamping,
+    Scene,
+    StokesDrag,
+    cantilever_scene,
+    paper_finger,
+)
 from soft_gripper_env.physics.config import GripperDesign
 from soft_gripper_env.physics.rod_3d import rod3d_elastic, rod3d_update_frames
 from soft_gripper_env.physics.rod_planar import planar_elastic

@@ -55,7 +55,7 @@ def test_batch_members_are_independent(model):
     single_states = [sim.initial_state() for sim in singles]
     for _ in range(15):
         state = batched.step(state, curvatures[:, None] * np.ones(3)).state
-        single_states = [sim.step(st, c).state for sim, st, c in zip(singles, single_states, curvatures)]
+        single_states = [sim.step(st, c).state for sim, st, c in zip(singles, single_states, curvatures, strict=True)]
     for b, single in enumerate(single_states):
         np.testing.assert_array_equal(state.q[b], single.q[0])
 

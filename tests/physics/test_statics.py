@@ -8,8 +8,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from soft_gripper_env.physics import (GripperDesign, NewtonSettings, Scene, Simulator, cantilever_scene,
-                                      paper_finger)
+from soft_gripper_env.physics import GripperDesign, NewtonSettings, Scene, Simulator, cantilever_scene, paper_finger
 from soft_gripper_env.physics.analytic import cantilever_elastica_tip
 from soft_gripper_env.physics.config import replace
 
