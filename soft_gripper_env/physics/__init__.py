@@ -24,7 +24,7 @@ from .simulator import RodState, Simulator, StepResult, Trajectory, run_ramp
 
 __all__ = [
     "ELASTOSIL_MA_4601", "PAPER_DEFECTIVE_DRAG", "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "FingerDesign",
-    "GripperDesign", "Material", "NewtonSettings", "Scene", "cantilever_scene", "linear_taper", "paper_finger", "paper_scene",
-    "Discretization", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping", "StokesDrag", "RodState",
-    "Simulator", "StepResult", "Trajectory", "run_ramp",
+    "GripperDesign", "Material", "NewtonSettings", "Scene", "cantilever_scene", "linear_taper", "paper_finger",
+    "paper_scene", "Discretization", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping", "StokesDrag",
+    "RodState", "Simulator", "StepResult", "Trajectory", "run_ramp",
 ]
