@@ -48,7 +48,7 @@ def paper_run(model: str) -> Trajectory:
 
 def plot_paper_defect(ax, model: str, material) -> None:
     """Overlay the same scene with the drag that produced the paper's curves (η = 1000 Pa·s on nodes 2–4)."""
-    run = run_ramp(paper_scene(model, material=material, drag=PAPER_DEFECTIVE_DRAG))
+    run = run_ramp(paper_scene(model, material=material, medium=(PAPER_DEFECTIVE_DRAG,)))
     plot_tip_height(ax, run, "paper's defective drag: η = 1000 Pa·s on nodes 2–4", ls=":", color="tab:red")
 
 
@@ -76,7 +76,7 @@ def run_case(case: str, model: str, out: Path) -> dict[str, Trajectory]:
         plot_timelapse(ax, base)
         ax.set_title("Fig. 7: time-lapse with Stokes drag (every 0.1 s)")
     elif case == "fig8":
-        runs = {"no drag": run_ramp(paper_scene(model, drag=False))}
+        runs = {"no drag": run_ramp(paper_scene(model, medium="air"))}
         fig, (ax, ax3) = new_figure(2, (False, True))
         plot_tip_height(ax, runs["no drag"], "no drag")
         plot_tip_height(ax, base, "Stokes drag at η = 1.0e-3 Pa·s (Fig. 5)", ls="--", color="gray")

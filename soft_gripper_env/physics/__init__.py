@@ -19,12 +19,14 @@ from .config import (
     paper_scene,
 )
 from .discretization import Discretization
-from .forces import Buoyancy, ForceModel, Gravity, MassProportionalDamping, StokesDrag
+from .forces import Buoyancy, ForceModel, Gravity, MassProportionalDamping, StepContext, StokesDrag
+from .hydrodynamics import WATER_DENSITY, AddedMass, Current, MorisonDrag, fluid_forces
 from .simulator import RodState, Simulator, StepResult, Trajectory, run_ramp
 
 __all__ = [
     "ELASTOSIL_MA_4601", "PAPER_DEFECTIVE_DRAG", "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "FingerDesign",
     "GripperDesign", "Material", "NewtonSettings", "Scene", "cantilever_scene", "linear_taper", "paper_finger",
     "paper_scene", "Discretization", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping", "StokesDrag",
-    "RodState", "Simulator", "StepResult", "Trajectory", "run_ramp",
+    "RodState", "Simulator", "StepResult", "Trajectory", "run_ramp", "StepContext", "WATER_DENSITY", "AddedMass",
+    "Current", "MorisonDrag", "fluid_forces",
 ]

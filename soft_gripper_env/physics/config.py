@@ -18,7 +18,7 @@ import numpy as np
 
 from .forces import ForceModel, Gravity, StokesDrag
 
-ClampConvention = Literal["paper", "accurate"]
+ClampConvention = Literal["paper", "accurate", "free"]
 RodModel = Literal["planar", "3d"]
 
 WATER_VISCOSITY = 1.0e-3
@@ -85,6 +85,7 @@ class FingerDesign:
       node 1 starts half an edge beyond the wall, so a cantilever under-deflects by about 10 % at N = 20.
     - ``"accurate"``: the rigid first edge is centred on the wall (nodes 0 and 1 at s = −Δl/2 and +Δl/2,
       Δl = L/(N − 1.5)), so the bending region of node 1 starts exactly at the wall and the tip sits at s = L.
+    - ``"free"``: nothing is held; a free rod of length L (validation of fluid forces, free objects).
     """
 
     length: float
@@ -101,8 +102,8 @@ class FingerDesign:
         if not isinstance(self.n_nodes, (int, np.integer)) or not 4 <= self.n_nodes <= 10_000:
             raise ValueError(f"FingerDesign.n_nodes = {self.n_nodes!r} (count) is outside the allowed range "
                              f"[4, 10000] and must be an integer")
-        if self.clamp not in ("paper", "accurate"):
-            raise ValueError(f"FingerDesign.clamp = {self.clamp!r} is not one of 'paper', 'accurate'")
+        if self.clamp not in ("paper", "accurate", "free"):
+            raise ValueError(f"FingerDesign.clamp = {self.clamp!r} is not one of 'paper', 'accurate', 'free'")
         if isinstance(self.radius, (tuple, list, np.ndarray)):
             if len(self.radius) != self.n_nodes:
                 raise ValueError(f"FingerDesign.radius has {len(self.radius)} values; a per-node radius profile "
@@ -121,13 +122,13 @@ class FingerDesign:
     @property
     def edge_length(self) -> float:
         """Rest length Δl of every edge [m]."""
-        offset = 1.0 if self.clamp == "paper" else 1.5
+        offset = 1.5 if self.clamp == "accurate" else 1.0
         return self.length / (self.n_nodes - offset)
 
     @property
     def node_arclength(self) -> np.ndarray:
         """Rest position of each node along the finger, measured from the palm [m], shape (N,)."""
-        start = 0.0 if self.clamp == "paper" else -0.5
+        start = -0.5 if self.clamp == "accurate" else 0.0
         return (start + np.arange(self.n_nodes)) * self.edge_length
 
 
@@ -220,19 +221,22 @@ PAPER_DEFECTIVE_DRAG = StokesDrag(viscosity=1000.0, nodes=(2, 3, 4))
 """The drag that produced the paper's published curves (physics.md §2): η = 10⁶ × water's, on nodes 2–4 only."""
 
 
+Medium = Literal["air", "stokes", "water"]
+
+
 def paper_scene(model: RodModel = "planar", *, material: Material = ELASTOSIL_MA_4601,
-                variable_stiffness: bool = False, drag: bool | StokesDrag = True) -> Scene:
+                variable_stiffness: bool = False, medium: Medium | tuple[ForceModel, ...] = "stokes") -> Scene:
     """The paper's three-finger scene, exactly as ``physics.md`` §1 gives it.
 
-    Full dry weight (no buoyancy), the ramp κ̄ = −0.15·t, backward Euler at Δt = 0.01 s for T = 1 s, the paper's
-    clamp. ``drag``: True for per-node Stokes drag c = 6πrη at water's viscosity, False for none, or a given
-    :class:`StokesDrag` (such as :data:`PAPER_DEFECTIVE_DRAG`).
+    The ramp κ̄ = −0.15·t, backward Euler at Δt = 0.01 s for T = 1 s, the paper's clamp, and full weight. ``medium``
+    chooses the fluid forces (:func:`~.hydrodynamics.fluid_forces`): ``"stokes"`` is the paper's per-node Stokes drag
+    at water's viscosity and no buoyancy; ``"air"`` has no fluid force; ``"water"`` has buoyancy, Morison drag and
+    added mass. A tuple of force models replaces them, e.g. ``(PAPER_DEFECTIVE_DRAG,)``.
     """
+    from .hydrodynamics import fluid_forces
+
     forces: tuple[ForceModel, ...] = (Gravity(),)
-    if drag is True:
-        forces += (StokesDrag(viscosity=WATER_VISCOSITY),)
-    elif isinstance(drag, StokesDrag):
-        forces += (drag,)
+    forces += tuple(medium) if isinstance(medium, tuple) else fluid_forces(medium)
     finger = paper_finger(material, variable_stiffness)
     return Scene(gripper=GripperDesign(finger), forces=forces, model=model)
 
@@ -248,4 +252,4 @@ def cantilever_scene(n_nodes: int = 20, clamp: ClampConvention = "accurate", mod
 
 __all__ = ["Material", "FingerDesign", "GripperDesign", "NewtonSettings", "Scene", "ELASTOSIL_MA_4601",
            "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "PAPER_DEFECTIVE_DRAG", "linear_taper", "paper_finger",
-           "paper_scene", "cantilever_scene", "check_range", "replace"]
+           "paper_scene", "cantilever_scene", "check_range", "replace", "Medium"]

@@ -112,7 +112,8 @@ class Discretization:
         dof_mass[:, :dim] = node_mass[:, None]
         residual_scale = np.ones((n, stride))
         free = np.ones((n, stride), dtype=bool)
-        free[:2, :] = False  # nodes 0 and 1 clamp the first edge (and, in 3-D, its twist θ_0)
+        if finger.clamp != "free":
+            free[:2, :] = False  # nodes 0 and 1 clamp the first edge (and, in 3-D, its twist θ_0)
         if not planar:
             edge_mass = material.density * math.pi * edge_radius**2 * dl
             dof_mass[:-1, 3] = 0.5 * edge_mass * edge_radius**2

@@ -3,18 +3,20 @@
 Every model implements :meth:`ForceModel.accumulate`. The simulator sums the models a scene lists, and nothing else:
 a scene without drag pays nothing for drag. Arrays follow the layout of :class:`~.discretization.Discretization`:
 
-=========================  ==========================================================  ========
-name                       meaning                                                     shape
-=========================  ==========================================================  ========
-``positions``              node positions, planar (s, z) or 3-D (x, y, z) [m]          (R, N, D)
-``velocities``             node velocities [m/s]                                       (R, N, D)
-``force``                  generalized force, accumulated into [N]                     (R, N, D)
-``system_band``            band of the Newton matrix (see ``linalg``), accumulated     (R, n, kd+1)
-=========================  ==========================================================  ========
+=================  ===============================================================  ============
+name               meaning                                                          shape
+=================  ===============================================================  ============
+``positions``      node positions, planar (s, z) or 3-D (x, y, z) [m]               (R, N, D)
+``velocities``     node velocities [m/s]                                            (R, N, D)
+``accelerations``  node accelerations [m/s²]                                        (R, N, D)
+``force``          generalized force, accumulated into [N]                          (R, N, D)
+``system_band``    band of the Newton matrix (see ``linalg``), accumulated into     (R, n, kd+1)
+=================  ===============================================================  ============
 
-R counts rods (batch × fingers), N nodes, D = 2 (planar) or 3, n the DOFs per rod. A model adds its force f to
-``force`` and −(∂f/∂q + ∂f/∂v · ∂v/∂q) to ``system_band``; ``velocity_derivative`` = ∂v/∂q of the integrator
-(1/Δt for backward Euler), so models need not know which integrator runs them.
+R counts rods (batch × fingers, finger index = r mod F), N nodes, D = 2 (planar) or 3, n the DOFs per rod. A model
+adds its force f to ``force`` and −(∂f/∂q + ∂f/∂v·∂v/∂q + ∂f/∂a·∂a/∂q) to ``system_band``. The integrator supplies
+∂v/∂q and ∂a/∂q in the :class:`StepContext` (1/Δt and 1/Δt² for backward Euler), so models need not know which
+integrator runs them.
 """
 
 from __future__ import annotations
@@ -35,11 +37,25 @@ def _check_positive(owner: str, name: str, value: float, unit: str, allow_zero: 
     check_range(owner, name, value, unit, 0.0, low_inclusive=allow_zero)
 
 
+@dataclass(frozen=True, eq=False)
+class StepContext:
+    """What the integrator tells the force models about the step being solved."""
+
+    time: float
+    """Time at the start of the step [s]."""
+    start_positions: np.ndarray
+    """Node positions at the start of the step [m], (R, N, D)."""
+    velocity_derivative: float
+    """∂v/∂q of the integrator [1/s]."""
+    acceleration_derivative: float
+    """∂a/∂q of the integrator [1/s²]."""
+
+
 class ForceModel:
     """Interface of every external force. Subclasses are frozen dataclasses holding their parameters in SI units."""
 
-    def accumulate(self, disc: Discretization, positions: np.ndarray, velocities: np.ndarray, time: float,
-                   force: np.ndarray, system_band: np.ndarray, velocity_derivative: float) -> None:
+    def accumulate(self, disc: Discretization, ctx: StepContext, positions: np.ndarray, velocities: np.ndarray,
+                   accelerations: np.ndarray, force: np.ndarray, system_band: np.ndarray) -> None:
         """Add this model's force [N] to ``force`` and its negated Jacobian to ``system_band``."""
         raise NotImplementedError
 
@@ -54,7 +70,7 @@ class Gravity(ForceModel):
     def __post_init__(self) -> None:
         _check_positive("Gravity", "acceleration", self.acceleration, "m/s²")
 
-    def accumulate(self, disc, positions, velocities, time, force, system_band, velocity_derivative):
+    def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
         force[..., disc.vertical_axis] -= disc.node_mass * self.acceleration
 
 
@@ -71,7 +87,7 @@ class Buoyancy(ForceModel):
         _check_positive("Buoyancy", "fluid_density", self.fluid_density, "kg/m³")
         _check_positive("Buoyancy", "acceleration", self.acceleration, "m/s²")
 
-    def accumulate(self, disc, positions, velocities, time, force, system_band, velocity_derivative):
+    def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
         force[..., disc.vertical_axis] += disc.node_volume * (self.fluid_density * self.acceleration)
 
 
@@ -103,13 +119,13 @@ class StokesDrag(ForceModel):
             raise ValueError(f"StokesDrag.nodes = {self.nodes!r} names node {max(self.nodes)}; the finger has nodes "
                              f"0 … {n_nodes - 1}")
 
-    def accumulate(self, disc, positions, velocities, time, force, system_band, velocity_derivative):
+    def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
         coefficient = 6.0 * math.pi * self.viscosity * disc.node_radius  # [N·s/m], shape (N,)
         if self.nodes is not None:
             selected = np.zeros_like(coefficient)
             selected[list(self.nodes)] = coefficient[list(self.nodes)]
             coefficient = selected
-        _add_linear_damping(disc, coefficient, velocities, force, system_band, velocity_derivative)
+        _add_linear_damping(disc, coefficient, velocities, force, system_band, ctx.velocity_derivative)
 
 
 @dataclass(frozen=True)
@@ -122,8 +138,9 @@ class MassProportionalDamping(ForceModel):
     def __post_init__(self) -> None:
         _check_positive("MassProportionalDamping", "rate", self.rate, "1/s")
 
-    def accumulate(self, disc, positions, velocities, time, force, system_band, velocity_derivative):
-        _add_linear_damping(disc, self.rate * disc.node_mass, velocities, force, system_band, velocity_derivative)
+    def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
+        _add_linear_damping(disc, self.rate * disc.node_mass, velocities, force, system_band,
+                            ctx.velocity_derivative)
 
 
 def _add_linear_damping(disc: Discretization, coefficient: np.ndarray, velocities: np.ndarray, force: np.ndarray,

@@ -22,6 +22,7 @@ import numpy as np
 
 from .config import Scene
 from .discretization import Discretization
+from .forces import StepContext
 from .linalg import newton_iteration
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
@@ -153,7 +154,7 @@ class Simulator:
         """Largest free-DOF force imbalance at rest divided by its Newton tolerance, per gripper (B,)."""
         R, N, S = self.n_rods, self.disc.n_nodes, self.disc.stride
         q = state.q.reshape(R, N, S)
-        force, _ = self._assemble(q, q, self._frames(state), self._natural_curvature(natural_curvature),
+        force, _ = self._assemble(q, q, q, self._frames(state), self._natural_curvature(natural_curvature),
                                   state.time, 1.0, hessian=False)
         ratio = np.max(np.abs(force.reshape(R, -1)) * self._tolerance_inverse, axis=1)
         return ratio.reshape(self.batch_size, self.n_fingers).max(axis=1)
@@ -165,8 +166,9 @@ class Simulator:
         return (state.tangent.reshape(R, N - 1, 3), state.director.reshape(R, N - 1, 3),
                 state.reference_twist.reshape(R, N))
 
-    def _assemble(self, q, q_old, frames_old, kbar, time, velocity_derivative, hessian=True):
-        """Total force [N] on every DOF (R, N, S) and the band of −∂f/∂q (R, n, kd+1) at coordinates q."""
+    def _assemble(self, q, q_old, q_pred, frames_old, kbar, time, dt, hessian=True):
+        """Total force [N] on every DOF (R, N, S) and the band of −∂f/∂q (R, n, kd+1) at coordinates q, for a
+        backward-Euler step of length ``dt`` from ``q_old`` with predictor ``q_pred`` = q_old + Δt·v_old."""
         disc = self.disc
         R, N, S, D = q.shape[0], disc.n_nodes, disc.stride, disc.dim
         force = np.zeros((R, N, S))
@@ -177,9 +179,13 @@ class Simulator:
         else:
             rod3d_elastic(q, *frames_old, disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness,
                           disc.twist_stiffness, disc.voronoi_length, kbar, force, band, hessian)
-        velocity = (q - q_old) * velocity_derivative
-        for model in self.scene.forces:
-            model.accumulate(disc, q[..., :D], velocity[..., :D], time, force[..., :D], band, velocity_derivative)
+        if self.scene.forces:
+            ctx = StepContext(time=time, start_positions=q_old[..., :D], velocity_derivative=1.0 / dt,
+                              acceleration_derivative=1.0 / dt**2)
+            velocity = (q[..., :D] - q_old[..., :D]) / dt
+            acceleration = (q[..., :D] - q_pred[..., :D]) / dt**2
+            for model in self.scene.forces:
+                model.accumulate(disc, ctx, q[..., :D], velocity, acceleration, force[..., :D], band)
         return force, band
 
     def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
@@ -194,7 +200,6 @@ class Simulator:
             q += dt * dt * state.acceleration.reshape(R, N, S)  # start from the extrapolated motion
         frames_old = self._frames(state)
         mass_term = disc.dof_mass / dt**2
-        velocity_derivative = 1.0 / dt
         tolerance_inverse = self._tolerance_inverse
         active = np.ones(R, dtype=bool)
         converged = np.zeros(R, dtype=bool)
@@ -203,7 +208,7 @@ class Simulator:
         max_iterations = scene.newton.max_iterations
         q_flat, q_pred_flat = q.reshape(R, n), q_pred.reshape(R, n)
         for it in range(max_iterations + 1):
-            force, band = self._assemble(q, q_old, frames_old, kbar, state.time, velocity_derivative)
+            force, band = self._assemble(q, q_old, q_pred, frames_old, kbar, state.time, dt)
             if not newton_iteration(q_flat, q_pred_flat, force.reshape(R, n), band, mass_term, tolerance_inverse,
                                     disc.free, active, converged, iterations, ratio, it < max_iterations):
                 break

@@ -41,7 +41,8 @@ from soft_gripper_env.physics.forces import Buoyancy, Gravity, MassProportionalD
     (lambda: MassProportionalDamping(rate="fast"), r"MassProportionalDamping\.rate = 'fast' is not a number"),
     (lambda: Simulator(paper_scene(), batch_size=0), r"Simulator\.batch_size = 0"),
     (lambda: StokesDrag(nodes=(2, -1)), r"StokesDrag\.nodes = \(2, -1\) must be None or non-negative"),
-    (lambda: paper_scene(drag=StokesDrag(nodes=(25,))), r"StokesDrag\.nodes = \(25,\) names node 25; .* 0 … 19"),
+    (lambda: paper_scene(medium=(StokesDrag(nodes=(25,)),)), r"StokesDrag\.nodes = \(25,\) names node 25; .* 0 … 19"),
+    (lambda: paper_scene(medium="honey"), r"medium = 'honey' is not one of 'air', 'stokes', 'water'"),
 ])
 def test_bad_configuration_raises_clear_error(make, pattern):
     with pytest.raises(ValueError, match=pattern):

@@ -8,6 +8,7 @@ from soft_gripper_env.physics import (
     Discretization,
     MassProportionalDamping,
     Scene,
+    StepContext,
     StokesDrag,
     cantilever_scene,
     paper_finger,
@@ -15,6 +16,19 @@ from soft_gripper_env.physics import (
 from soft_gripper_env.physics.config import GripperDesign
 from soft_gripper_env.physics.rod_3d import rod3d_elastic, rod3d_update_frames
 from soft_gripper_env.physics.rod_planar import planar_elastic
+
+
+def evaluate_force_model(model, disc, q, q_old, q_pred, dt):
+    """One force model's force (flat) and dense Newton-matrix contribution at coordinates q (1, N, S) of a
+    backward-Euler step of length dt from q_old with predictor q_pred."""
+    D = disc.dim
+    force = np.zeros(q.shape)
+    band = np.zeros((1, disc.n_dofs, disc.band_width + 1))
+    ctx = StepContext(time=0.3, start_positions=q_old[..., :D], velocity_derivative=1 / dt,
+                      acceleration_derivative=1 / dt**2)
+    model.accumulate(disc, ctx, q[..., :D], (q - q_old)[..., :D] / dt, (q - q_pred)[..., :D] / dt**2,
+                     force[..., :D], band)
+    return force.ravel(), band_to_dense(band[0])
 
 
 def band_to_dense(band):
@@ -151,16 +165,12 @@ def test_velocity_force_jacobian(model, force_model):
                   model=model)
     disc = Discretization.from_scene(scene)
     rng = np.random.default_rng(3)
-    N, S, D = disc.n_nodes, disc.stride, disc.dim
+    N, S = disc.n_nodes, disc.stride
     dt = 0.01
     q_old = rng.normal(size=(1, N, S))
 
     def force_and_band(q):
-        force = np.zeros((1, N, S))
-        band = np.zeros((1, N * S, disc.band_width + 1))
-        v = (q - q_old) / dt
-        force_model.accumulate(disc, q[..., :D], v[..., :D], 0.0, force[..., :D], band, 1.0 / dt)
-        return force.ravel(), band_to_dense(band[0])
+        return evaluate_force_model(force_model, disc, q, q_old, q_old, dt)
 
     q = q_old + rng.normal(scale=1e-3, size=q_old.shape)
     f0, jac = force_and_band(q)
@@ -175,13 +185,12 @@ def test_velocity_force_jacobian(model, force_model):
 
 def test_gravity_only_has_no_jacobian_and_pulls_down():
     disc = Discretization.from_scene(cantilever_scene())
-    force = np.zeros((1, disc.n_nodes, disc.stride))
-    band = np.zeros((1, disc.n_dofs, disc.band_width + 1))
-    for model in cantilever_scene().forces:
-        model.accumulate(disc, None, None, 0.0, force, band, 100.0)
+    q = disc.rest_q[:1]
+    (model,) = cantilever_scene().forces
+    force, band = evaluate_force_model(model, disc, q, q, q, 0.01)
     assert not band.any()
-    np.testing.assert_allclose(force[0, :, 1], -disc.node_mass * 9.81)
-    np.testing.assert_allclose(force[0, :, 0], 0.0)
+    np.testing.assert_allclose(force.reshape(-1, 2)[:, 1], -disc.node_mass * 9.81)
+    np.testing.assert_allclose(force.reshape(-1, 2)[:, 0], 0.0)
 
 
 @pytest.mark.parametrize("n, kd", [(12, 5), (40, 10)])

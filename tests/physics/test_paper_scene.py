@@ -88,9 +88,9 @@ def test_paper_defective_drag_explains_the_published_stall():
     def tip_z(run, t):
         return run.positions[int(round(t / 0.01)), 0, 0, -1, 2]
 
-    defective = run_ramp(paper_scene(drag=PAPER_DEFECTIVE_DRAG))
+    defective = run_ramp(paper_scene(medium=(PAPER_DEFECTIVE_DRAG,)))
     correct = run_ramp(paper_scene())
     assert abs(tip_z(defective, 0.25) - tip_z(defective, 0.19)) < 2e-3  # stalls: < 2 mm in 60 ms
     assert tip_z(correct, 0.33) - tip_z(correct, 0.21) > 15e-3  # rebounds
-    drag_free = run_ramp(paper_scene(drag=False))
+    drag_free = run_ramp(paper_scene(medium="air"))
     assert np.abs(drag_free.positions - correct.positions).max() < 1e-3  # water's Stokes drag is negligible

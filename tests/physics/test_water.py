@@ -1,0 +1,212 @@
+"""Water: buoyancy, Morison drag and added mass, each checked against a closed form or a symmetry."""
+
+import math
+
+import numpy as np
+import pytest
+from test_derivatives import band_to_dense, evaluate_force_model
+
+from soft_gripper_env.physics import (WATER_DENSITY, AddedMass, Buoyancy, Current, Discretization, FingerDesign,
+                                      Gravity, GripperDesign, Material, MorisonDrag, NewtonSettings, Scene, Simulator,
+                                      StepContext, cantilever_scene, paper_finger, paper_scene, run_ramp)
+from soft_gripper_env.physics.config import replace
+
+CURRENT = Current(velocity=(0.05, -0.12, 0.03), oscillation=(0.02, 0.0, 0.01), period=0.7)
+
+
+def random_state(disc, rng, scale=0.01):
+    q = disc.rest_q[:1] + rng.normal(scale=scale, size=disc.rest_q[:1].shape)
+    if disc.stride == 4:
+        q[..., 3] = 0.0
+    return q
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_morison_velocity_jacobian(model):
+    """With the tangents held, the drag's Jacobian equals −∂f/∂v·∂v/∂q by finite differences."""
+    scene = Scene(GripperDesign(paper_finger(), finger_angles=(0.4,)), forces=(), model=model)
+    disc = Discretization.from_scene(scene)
+    rng = np.random.default_rng(7)
+    q_old = random_state(disc, rng)
+    q = q_old + rng.normal(scale=3e-3, size=q_old.shape)  # velocities of order 0.3 m/s at Δt = 0.01 s
+    drag = MorisonDrag(current=CURRENT)
+    D, dt = disc.dim, 0.01
+
+    def force_at(q_new):
+        force = np.zeros(q.shape)
+        band = np.zeros((1, disc.n_dofs, disc.band_width + 1))
+        ctx = StepContext(0.3, q_old[..., :D], 1 / dt, 1 / dt**2)
+        drag.accumulate(disc, ctx, q[..., :D], (q_new - q_old)[..., :D] / dt, np.zeros_like(q[..., :D]),
+                        force[..., :D], band)
+        return force.ravel(), band_to_dense(band[0])
+
+    f0, jacobian = force_at(q)
+    assert np.abs(f0).max() > 1e-3
+    h = 1e-8
+    for j in range(q.size):
+        dq = np.zeros(q.size)
+        dq[j] = h
+        column = -(force_at(q + dq.reshape(q.shape))[0] - force_at(q - dq.reshape(q.shape))[0]) / (2 * h)
+        np.testing.assert_allclose(jacobian[:, j], column, rtol=1e-5, atol=1e-7 * np.abs(jacobian).max())
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_added_mass_jacobian(model):
+    scene = Scene(GripperDesign(paper_finger(), finger_angles=(1.1,)), forces=(), model=model)
+    disc = Discretization.from_scene(scene)
+    rng = np.random.default_rng(8)
+    q_old = random_state(disc, rng)
+    q_pred = q_old + rng.normal(scale=1e-3, size=q_old.shape)
+    q = q_pred + rng.normal(scale=1e-4, size=q_old.shape)
+    model_ = AddedMass()
+    f0, jacobian = evaluate_force_model(model_, disc, q, q_old, q_pred, 0.01)
+    assert np.abs(f0).max() > 0
+    h = 1e-7
+    for j in range(q.size):
+        dq = np.zeros(q.size)
+        dq[j] = h
+        column = -(evaluate_force_model(model_, disc, q + dq.reshape(q.shape), q_old, q_pred, 0.01)[0]
+                   - evaluate_force_model(model_, disc, q - dq.reshape(q.shape), q_old, q_pred, 0.01)[0]) / (2 * h)
+        np.testing.assert_allclose(jacobian[:, j], column, rtol=1e-6, atol=1e-9 * np.abs(jacobian).max())
+    # the added-mass matrix is positive semi-definite: it only ever adds inertia
+    assert np.linalg.eigvalsh(jacobian).min() > -1e-9 * np.abs(jacobian).max()
+
+
+def finger_scene(density, forces, model="planar", clamp="paper", n_nodes=20, angles=(0.0,)):
+    material = Material("test", youngs_modulus=386.66e3, density=density)
+    finger = FingerDesign(0.2, n_nodes, 0.02, material, clamp)
+    return Scene(GripperDesign(finger, finger_angles=angles), forces=forces, model=model,
+                 newton=NewtonSettings(relative_tolerance=1e-10))
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_neutrally_buoyant_finger_stays_straight(model):
+    scene = finger_scene(WATER_DENSITY, (Gravity(), Buoyancy(), MorisonDrag(), AddedMass()), model)
+    sim = Simulator(scene)
+    state = sim.initial_state()
+    for _ in range(100):
+        result = sim.step(state, 0.0)
+        assert result.converged.all()
+        state = result.state
+    assert np.abs(sim.world_positions(state)[..., 2]).max() <= 1e-9
+
+
+def test_light_finger_mirrors_heavy_finger():
+    """ρ = 900 kg/m³ in water lifts as far as a finger of density ρ_w − ρ = 100 kg/m³ sags in air."""
+    light = finger_scene(900.0, (Gravity(), Buoyancy()))
+    heavy = finger_scene(WATER_DENSITY - 900.0, (Gravity(),))
+    tips = []
+    for scene in (light, heavy):
+        sim = Simulator(scene)
+        result = sim.equilibrium(sim.initial_state(), 0.0)
+        assert result.converged.all()
+        tips.append(sim.world_positions(result.state)[0, 0])
+    assert tips[0][-1, 2] > 1e-3
+    np.testing.assert_allclose(tips[0][:, 2], -tips[1][:, 2], rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(tips[0][:, 0], tips[1][:, 0], rtol=1e-10)
+
+
+def test_free_rod_sinks_broadside_at_terminal_speed():
+    density, radius = 1500.0, 0.01
+    scene = Scene(GripperDesign(FingerDesign(0.2, 20, radius, Material("rod", 386.66e3, density), "free"),
+                                finger_angles=(0.0,)),
+                  forces=(Gravity(), Buoyancy(), MorisonDrag(), AddedMass()), model="planar")
+    diameter = 2 * radius
+    # ½·ρ_w·C_n·D·v² = (ρ − ρ_w)·(π·D²/4)·g per unit length
+    terminal = math.sqrt((density - WATER_DENSITY) * math.pi * diameter**2 / 4 * 9.81
+                         / (0.5 * WATER_DENSITY * 1.2 * diameter))
+    sim = Simulator(scene)
+    state = sim.initial_state()
+    for _ in range(300):
+        state = sim.step(state, 0.0).state
+    velocity = state.velocity[0, 0]
+    assert np.abs(velocity[:, 0]).max() < 1e-6 * terminal  # sinks broadside, no drift along the rod
+    assert -velocity[:, 1].mean() == pytest.approx(terminal, rel=0.02)
+    assert np.ptp(velocity[:, 1]) < 1e-6  # and stays straight
+
+
+def first_mode_period(scene, dt=1e-3, duration=0.8):
+    """Period [s] of the tip's free vibration after release from a small static bend, by zero crossings."""
+    sim = Simulator(replace(scene, time_step=dt))
+    state = sim.equilibrium(sim.initial_state(), 0.01).state
+    z = []
+    for _ in range(int(duration / dt)):
+        state = sim.step(state, 0.0).state
+        z.append(sim.world_positions(state)[0, 0, -1, 2])
+    z = np.array(z)
+    t = dt * np.arange(1, len(z) + 1)
+    crossings = [t[i] - z[i] * dt / (z[i + 1] - z[i]) for i in range(len(z) - 1) if z[i] * z[i + 1] < 0]
+    assert len(crossings) >= 3
+    return 2 * np.mean(np.diff(crossings))
+
+
+def test_added_mass_lowers_first_mode_frequency():
+    air = replace(cantilever_scene(20, "accurate"), forces=())
+    water = replace(air, forces=(AddedMass(),))
+    density = air.gripper.finger.material.density
+    expected = math.sqrt(density / (density + WATER_DENSITY))  # m/(m + m_a), same cross-section
+    ratio = first_mode_period(air) / first_mode_period(water)
+    assert ratio == pytest.approx(expected, rel=0.03)
+    assert 1 / first_mode_period(air) == pytest.approx(5.0, rel=0.15)  # physics.md §4: about 5 Hz
+
+
+def test_cross_current_pushes_finger_downstream():
+    current = Current(velocity=(0.0, 0.3, 0.0))
+    scene = replace(paper_scene("3d"), forces=(Gravity(), Buoyancy(), MorisonDrag(current=current), AddedMass()))
+    sim = Simulator(scene)
+    state = sim.initial_state()
+    for _ in range(60):
+        state = sim.step(state, 0.0).state
+    tip_y = sim.world_positions(state)[0, 0, -1, 1]
+    assert tip_y > 1e-3  # finger 0 points along +x; the current flows along +y
+
+
+def test_drag_reverses_with_relative_velocity_and_vanishes_with_the_water():
+    disc = Discretization.from_scene(replace(paper_scene("3d"), gripper=GripperDesign(paper_finger(),
+                                                                                       finger_angles=(0.3,))))
+    q = disc.rest_q[:1]
+    velocity = np.broadcast_to(np.array([0.1, -0.25, 0.2]), (1, disc.n_nodes, 3))
+
+    def drag_force(current_velocity, node_velocity):
+        force = np.zeros(q.shape)
+        band = np.zeros((1, disc.n_dofs, disc.band_width + 1))
+        ctx = StepContext(0.0, q[..., :3], 100.0, 1e4)
+        MorisonDrag(current=Current(velocity=current_velocity)).accumulate(
+            disc, ctx, q[..., :3], node_velocity, np.zeros_like(node_velocity), force[..., :3], band)
+        return force
+
+    still = np.zeros_like(velocity)
+    forward = drag_force((0.1, -0.25, 0.2), still)
+    assert np.abs(forward).max() > 1e-3
+    np.testing.assert_allclose(drag_force((-0.1, 0.25, -0.2), still), -forward, rtol=1e-12)
+    np.testing.assert_allclose(drag_force((0.0, 0.0, 0.0), -velocity), forward, rtol=1e-12)  # only relative counts
+    assert np.abs(drag_force((0.1, -0.25, 0.2), velocity)).max() == 0.0
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+@pytest.mark.parametrize("dt", [0.01, 0.05])
+def test_newton_converges_on_paper_ramp_in_water(model, dt):
+    scene = replace(paper_scene(model, medium="water"), time_step=dt)
+    run = run_ramp(scene)
+    assert run.converged.all()
+    assert run.newton_iterations.max() <= 6
+    assert run.positions[-1, 0, 0, -1, 2] < -0.1  # the fingers still close
+
+
+def test_water_medium_lists_only_fluid_forces_it_uses():
+    assert [type(f).__name__ for f in paper_scene(medium="air").forces] == ["Gravity"]
+    assert [type(f).__name__ for f in paper_scene(medium="water").forces] == ["Gravity", "Buoyancy", "MorisonDrag",
+                                                                              "AddedMass"]
+
+
+@pytest.mark.parametrize("make, pattern", [
+    (lambda: MorisonDrag(normal_coefficient=-1.0), r"MorisonDrag\.normal_coefficient = -1\.0"),
+    (lambda: MorisonDrag(current=(0, 1, 0)), r"MorisonDrag\.current must be a Current"),
+    (lambda: AddedMass(fluid_density=float("nan")), r"AddedMass\.fluid_density = nan kg/m³"),
+    (lambda: Current(velocity=(0.0, 1.0)), r"Current\.velocity = \(0\.0, 1\.0\) must have 3 components"),
+    (lambda: Current(period=0.0), r"Current\.period = 0\.0 s"),
+    (lambda: Current(velocity=(0.0, float("inf"), 0.0)), r"Current\.velocity = inf m/s"),
+])
+def test_bad_water_parameters_raise(make, pattern):
+    with pytest.raises(ValueError, match=pattern):
+        make()
