@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import Scene
-from .linalg import band_diagonal
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,12 +73,6 @@ class Discretization:
     @property
     def n_dofs(self) -> int:
         return self.n_nodes * self.stride
-
-    def add_to_position_diagonal(self, system_band: np.ndarray, values: np.ndarray) -> None:
-        """Add ``values`` (broadcastable to (R, N, D)) to the diagonal of the position DOFs in ``system_band``."""
-        # copy=False: a reshape that needed a copy would silently drop the update, so it must fail instead
-        diagonal = band_diagonal(system_band).reshape(system_band.shape[0], self.n_nodes, self.stride, copy=False)
-        diagonal[..., : self.dim] += values
 
     def world_positions(self, q: np.ndarray) -> np.ndarray:
         """World node positions [m], (B, F, N, 3), from coordinates ``q`` of shape (B, F, N, S)."""

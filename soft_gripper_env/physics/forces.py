@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
 if TYPE_CHECKING:
     from .discretization import Discretization
@@ -146,9 +147,20 @@ class MassProportionalDamping(ForceModel):
 def _add_linear_damping(disc: Discretization, coefficient: np.ndarray, velocities: np.ndarray, force: np.ndarray,
                         system_band: np.ndarray, velocity_derivative: float) -> None:
     """f = −c_i·v_i per node, isotropic; Jacobian −c_i·∂v/∂q on the diagonal."""
-    column = coefficient[:, None]
-    force -= column * velocities
-    disc.add_to_position_diagonal(system_band, column * velocity_derivative)
+    linear_damping(coefficient, velocities, velocity_derivative, disc.stride, force, system_band)
 
 
-__all__ = ["ForceModel", "Gravity", "Buoyancy", "StokesDrag", "MassProportionalDamping"]
+@njit(cache=True)
+def linear_damping(coefficient, velocities, velocity_derivative, stride, force, band):
+    """Adds −c_i·v_i to ``force`` (R, N, D) and c_i·∂v/∂q to the position diagonal of ``band`` (R, n, kd+1)."""
+    n_rods, n_nodes, dim = velocities.shape
+    kd = band.shape[2] - 1
+    for r in range(n_rods):
+        for i in range(n_nodes):
+            c = coefficient[i]
+            for k in range(dim):
+                force[r, i, k] -= c * velocities[r, i, k]
+                band[r, stride * i + k, kd] += c * velocity_derivative
+
+
+__all__ = ["ForceModel", "StepContext", "Gravity", "Buoyancy", "StokesDrag", "MassProportionalDamping"]

@@ -22,11 +22,6 @@ def scatter_contiguous(band, offset, hessian, m):
             row[kd - a + b] += hessian[a, b]
 
 
-def band_diagonal(band: np.ndarray) -> np.ndarray:
-    """The diagonal of every rod's matrix, a writable (R, n) view of ``band`` (R, n, kd+1)."""
-    return band[:, :, -1]
-
-
 @njit(cache=True)
 def solve_banded_symmetric_rod(a, x, free):
     """Solve A·x = b for one rod in place: ``x`` holds b on entry and the solution on return; ``a`` (n, kd+1) is

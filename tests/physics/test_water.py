@@ -6,9 +6,26 @@ import numpy as np
 import pytest
 from test_derivatives import band_to_dense, evaluate_force_model
 
-from soft_gripper_env.physics import (WATER_DENSITY, AddedMass, Buoyancy, Current, Discretization, FingerDesign,
-                                      Gravity, GripperDesign, Material, MorisonDrag, NewtonSettings, Scene, Simulator,
-                                      StepContext, cantilever_scene, paper_finger, paper_scene, run_ramp)
+from soft_gripper_env.physics import (
+    WATER_DENSITY,
+    AddedMass,
+    Buoyancy,
+    Current,
+    Discretization,
+    FingerDesign,
+    Gravity,
+    GripperDesign,
+    Material,
+    MorisonDrag,
+    NewtonSettings,
+    Scene,
+    Simulator,
+    StepContext,
+    cantilever_scene,
+    paper_finger,
+    paper_scene,
+    run_ramp,
+)
 from soft_gripper_env.physics.config import replace
 
 CURRENT = Current(velocity=(0.05, -0.12, 0.03), oscillation=(0.02, 0.0, 0.01), period=0.7)
