@@ -69,3 +69,32 @@ def test_core_speed_benchmark_writes_json_and_plot(tmp_path):
     assert all(v > 0 for v in result["batched_planar_us_per_gripper_step"].values())
     assert (tmp_path / "s.png").stat().st_size > 0
     assert "goal / value" in stdout
+
+
+def test_water_vs_air_example(tmp_path):
+    stdout = run_script("examples/water_vs_air.py", "--out", tmp_path)
+    with open(tmp_path / "water_vs_air.csv") as handle:
+        rows = list(csv.reader(handle))
+    assert rows[0] == ["time_s", "tip_z_air_m", "tip_z_stokes_m", "tip_z_water_m"]
+    data = np.array(rows[1:], dtype=float)
+    assert data.shape == (100, 4)
+    # water closes the finger more slowly than air: at 0.15 s the tip is still much higher
+    assert data[14, 3] > data[14, 1] + 0.03
+    assert (tmp_path / "water_vs_air.png").stat().st_size > 0
+    assert "peak drag" in stdout
+
+
+def test_water_vs_air_rejects_bad_time_step(tmp_path):
+    out = subprocess.run([sys.executable, "examples/water_vs_air.py", "--out", str(tmp_path), "--time-step", "-1"],
+                         cwd=ROOT, capture_output=True, text=True)
+    assert out.returncode == 2 and "Scene.time_step = -1.0 s" in out.stderr
+
+
+@pytest.mark.slow
+def test_medium_cost_benchmark(tmp_path):
+    stdout = run_script("benchmarks/medium_cost.py", "--repeats", "1", "--json", tmp_path / "m.json", "--plot",
+                        tmp_path / "m.png")
+    result = json.loads((tmp_path / "m.json").read_text())
+    assert set(result) == {"planar_B1", "3d_B1", "planar_B64"}
+    assert set(result["planar_B1"]) == {"air", "stokes", "water"}
+    assert "× air" in stdout and (tmp_path / "m.png").stat().st_size > 0
