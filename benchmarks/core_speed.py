@@ -10,44 +10,23 @@ planar run ≤ 30 ms, 3-D run ≤ 100 ms, batched planar ≤ 50 µs per gripper-
 
 from __future__ import annotations
 
-import os
+import argparse
+import json
+import sys
+from pathlib import Path
 
-for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from _timing import save_plot, time_ramp
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-from soft_gripper_env.physics import paper_scene, run_ramp  # noqa: E402
+from soft_gripper_env.physics import paper_scene
 
 BATCH_SIZES = (1, 16, 64, 256)
 GOALS = {"planar": 0.030, "3d": 0.100, "batched_us": 50.0}
 
 
-def time_paper_run(model: str, repeats: int) -> float:
-    scene = paper_scene(model)
-    run_ramp(scene)  # compile / warm up
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run_ramp(scene)
-        best = min(best, time.perf_counter() - start)
-    return best
-
-
 def time_batched(batch_size: int, repeats: int) -> float:
     """µs per gripper-step of the planar paper scene's whole run, B grippers stepped as one batch."""
     scene = paper_scene("planar")
-    run_ramp(scene, batch_size)  # warm up
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run_ramp(scene, batch_size)
-        best = min(best, time.perf_counter() - start)
-    return best / (scene.n_steps * batch_size) * 1e6
+    return time_ramp(scene, batch_size, repeats)[0] / (scene.n_steps * batch_size) * 1e6
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,8 +39,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--repeats = {args.repeats} must be at least 1")
 
     print("timing the paper scene (3 fingers, 100 steps, N = 20), single-threaded ...", flush=True)
-    planar_s = time_paper_run("planar", args.repeats)
-    spatial_s = time_paper_run("3d", args.repeats)
+    planar_s = time_ramp(paper_scene("planar"), 1, args.repeats)[0]
+    spatial_s = time_ramp(paper_scene("3d"), 1, args.repeats)[0]
     batched = {}
     for b in BATCH_SIZES:
         print(f"timing batched planar, B = {b} ...", flush=True)
@@ -110,10 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     ax1.set_title("batched planar throughput (one core)")
     ax1.grid(True, which="both", alpha=0.3)
     ax1.legend()
-    fig.tight_layout()
-    args.plot.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.plot, dpi=110)
-    print(f"wrote {args.plot}")
+    save_plot(fig, args.plot)
     return 0
 
 

@@ -9,18 +9,14 @@ the fluid forces it lists, so air is the floor.
 
 from __future__ import annotations
 
-import os
+import argparse
+import json
+import sys
+from pathlib import Path
 
-for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from _timing import save_plot, time_ramp
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-from soft_gripper_env.physics import paper_scene, run_ramp  # noqa: E402
+from soft_gripper_env.physics import paper_scene
 
 MEDIA = ("air", "stokes", "water")
 CONFIGURATIONS = (("planar", 1), ("3d", 1), ("planar", 64))
@@ -29,12 +25,7 @@ CONFIGURATIONS = (("planar", 1), ("3d", 1), ("planar", 64))
 def time_run(model: str, medium: str, batch_size: int, repeats: int) -> tuple[float, float]:
     """(µs per gripper-step, mean Newton iterations per step) of the whole paper ramp."""
     scene = paper_scene(model, medium=medium)
-    run = run_ramp(scene, batch_size)  # warm up
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run_ramp(scene, batch_size)
-        best = min(best, time.perf_counter() - start)
+    best, run = time_ramp(scene, batch_size, repeats)
     return best / (scene.n_steps * batch_size) * 1e6, float(run.newton_iterations.mean())
 
 
@@ -85,10 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     ax.set_ylabel("µs per gripper-step (one core)")
     ax.set_title("cost of each medium on the paper's ramp")
     ax.legend()
-    fig.tight_layout()
-    args.plot.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.plot, dpi=110)
-    print(f"wrote {args.plot}")
+    save_plot(fig, args.plot)
     return 0
 
 

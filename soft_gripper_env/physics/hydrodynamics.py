@@ -152,6 +152,18 @@ def _add_edge_block(band_r, stride, i, dim, block, scale):
 
 
 @njit(cache=True)
+def _edge_tangent(positions, r, e, t):
+    """Writes the unit tangent of edge e of rod r into ``t`` (D,)."""
+    length2 = 0.0
+    for k in range(t.size):
+        t[k] = positions[r, e + 1, k] - positions[r, e, k]
+        length2 += t[k] * t[k]
+    inverse_length = 1.0 / math.sqrt(length2)
+    for k in range(t.size):
+        t[k] *= inverse_length
+
+
+@njit(cache=True)
 def morison_drag(positions, velocities, current, normal, tangential, velocity_derivative, stride, force, band):
     """Morison drag of every edge: adds the force to ``force`` (R, N, D) and its velocity Jacobian to ``band``.
 
@@ -164,14 +176,9 @@ def morison_drag(positions, velocities, current, normal, tangential, velocity_de
     block = np.empty((dim, dim))
     for r in range(n_rods):
         for e in range(n_nodes - 1):
-            length2 = 0.0
-            for k in range(dim):
-                t[k] = positions[r, e + 1, k] - positions[r, e, k]
-                length2 += t[k] * t[k]
-            inverse_length = 1.0 / math.sqrt(length2)
+            _edge_tangent(positions, r, e, t)
             s = 0.0
             for k in range(dim):
-                t[k] *= inverse_length
                 w[k] = 0.5 * (velocities[r, e, k] + velocities[r, e + 1, k]) - current[r, k]
                 s += w[k] * t[k]
             speed_n2 = 0.0
@@ -207,13 +214,7 @@ def added_mass(start_positions, accelerations, edge_mass, acceleration_derivativ
     kd = band.shape[2] - 1
     for r in range(n_rods):
         for e in range(n_nodes - 1):
-            length2 = 0.0
-            for k in range(dim):
-                t[k] = start_positions[r, e + 1, k] - start_positions[r, e, k]
-                length2 += t[k] * t[k]
-            inverse_length = 1.0 / math.sqrt(length2)
-            for k in range(dim):
-                t[k] *= inverse_length
+            _edge_tangent(start_positions, r, e, t)
             half = 0.5 * edge_mass[e]
             for a in range(dim):
                 for b in range(dim):
