@@ -33,13 +33,31 @@ def plot_timelapse(ax, trajectory: Trajectory, every: float = 0.1) -> None:
     span = np.abs(trajectory.positions[..., :2]).max()
     ax.set_xlim(-span, span)
     ax.set_ylim(-span, span)
-    ax.set_zlim(trajectory.positions[..., 2].min() * 1.05, span * 0.3)
+    ax.set_zlim(min(trajectory.positions[..., 2].min() * 1.05, -span * 0.8), span * 0.3)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_zlabel("z [m]")
     ax.view_init(elev=14, azim=-30)  # no finger points along the line of sight
     sm = plt.cm.ScalarMappable(cmap="viridis_r", norm=plt.Normalize(trajectory.times[0], trajectory.times[-1]))
     ax.figure.colorbar(sm, ax=ax, shrink=0.6, pad=0.1, label="time [s]")
+
+
+def plot_sphere(ax, sphere, **style) -> None:
+    """A wireframe of a :class:`~.physics.contact.Sphere` on a 3-D axis."""
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 25), np.linspace(0, np.pi, 13))
+    c = sphere.center
+    ax.plot_wireframe(c[0] + sphere.radius * np.cos(u) * np.sin(v), c[1] + sphere.radius * np.sin(u) * np.sin(v),
+                      c[2] + sphere.radius * np.cos(v), color=style.pop("color", "0.6"), lw=0.4, **style)
+
+
+def plot_contact_forces(ax, positions: np.ndarray, report, step: int = -1, scale: float = 0.02) -> None:
+    """Reaction arrows [N → m by ``scale`` m/N] at the held nodes of gripper 0, on a 3-D axis."""
+    held = report.held[0]
+    x = positions[held]
+    f = report.reaction[0][held] * scale
+    if len(x):
+        ax.quiver(x[:, 0], x[:, 1], x[:, 2], f[:, 0], f[:, 1], f[:, 2], color="crimson", lw=1.5,
+                  label=f"contact reaction ({scale * 100:g} cm per N)")
 
 
 def new_figure(n_panels: int = 1, three_d: tuple[bool, ...] | None = None, width: float = 5.5):

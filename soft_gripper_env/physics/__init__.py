@@ -18,6 +18,7 @@ from .config import (
     paper_finger,
     paper_scene,
 )
+from .contact import PAPER_BALL, PENETRATION_TOLERANCE, ContactReport, ContactSettings, Sphere
 from .discretization import Discretization
 from .forces import Buoyancy, ForceModel, Gravity, MassProportionalDamping, StepContext, StokesDrag
 from .hydrodynamics import WATER_DENSITY, AddedMass, Current, MorisonDrag, fluid_forces
@@ -28,5 +29,6 @@ __all__ = [
     "GripperDesign", "Material", "NewtonSettings", "Scene", "cantilever_scene", "linear_taper", "paper_finger",
     "paper_scene", "Discretization", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping", "StokesDrag",
     "RodState", "Simulator", "StepResult", "Trajectory", "run_ramp", "StepContext", "WATER_DENSITY", "AddedMass",
-    "Current", "MorisonDrag", "fluid_forces",
+    "Current", "MorisonDrag", "fluid_forces", "PAPER_BALL", "PENETRATION_TOLERANCE", "ContactReport",
+    "ContactSettings", "Sphere",
 ]

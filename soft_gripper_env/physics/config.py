@@ -16,30 +16,15 @@ from typing import Literal
 
 import numpy as np
 
+from .contact import ContactSettings, Sphere
 from .forces import ForceModel, Gravity, StokesDrag
+from .validation import check_range
 
 ClampConvention = Literal["paper", "accurate", "free"]
 RodModel = Literal["planar", "3d"]
 
 WATER_VISCOSITY = 1.0e-3
 """Dynamic viscosity of water at about 20 °C [Pa·s]."""
-
-
-def check_range(owner: str, name: str, value: float, unit: str, low: float, high: float = math.inf,
-                low_inclusive: bool = False) -> None:
-    """Raise ``ValueError`` unless ``low < value < high`` (``low <= value`` when ``low_inclusive``).
-
-    The message names ``owner.name``, the value, its unit and the allowed range, so a user can fix the call.
-    """
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{owner}.{name} = {value!r} is not a number [{unit}]") from None
-    above_low = value >= low if low_inclusive else value > low
-    if not (math.isfinite(value) and above_low and value < high):
-        left = "[" if low_inclusive else "("
-        raise ValueError(f"{owner}.{name} = {value!r} {unit} is outside the allowed range "
-                         f"{left}{low:g}, {high:g}) {unit}")
 
 
 @dataclass(frozen=True)
@@ -185,8 +170,13 @@ class Scene:
     """Rate of the scripted natural-curvature ramp κ̄(t) = rate·t [1/s] (κ̄ is dimensionless integrated curvature;
     negative curls the fingers toward −z)."""
     newton: NewtonSettings = field(default_factory=NewtonSettings)
+    grasped_object: Sphere | None = None
+    """The object the fingers may touch; None for no contact at all (no search, no cost)."""
+    contact: ContactSettings = field(default_factory=ContactSettings)
 
     def __post_init__(self) -> None:
+        if self.grasped_object is not None and not isinstance(self.grasped_object, Sphere):
+            raise ValueError(f"Scene.grasped_object must be a Sphere or None, got {type(self.grasped_object).__name__}")
         if self.model not in ("planar", "3d"):
             raise ValueError(f"Scene.model = {self.model!r} is not one of 'planar', '3d'")
         check_range("Scene", "time_step", self.time_step, "s", 0.0, 10.0)
@@ -225,20 +215,22 @@ Medium = Literal["air", "stokes", "water"]
 
 
 def paper_scene(model: RodModel = "planar", *, material: Material = ELASTOSIL_MA_4601,
-                variable_stiffness: bool = False, medium: Medium | tuple[ForceModel, ...] = "stokes") -> Scene:
+                variable_stiffness: bool = False, medium: Medium | tuple[ForceModel, ...] = "stokes",
+                grasped_object: Sphere | None = None) -> Scene:
     """The paper's three-finger scene, exactly as ``physics.md`` §1 gives it.
 
     The ramp κ̄ = −0.15·t, backward Euler at Δt = 0.01 s for T = 1 s, the paper's clamp, and full weight. ``medium``
     chooses the fluid forces (:func:`~.hydrodynamics.fluid_forces`): ``"stokes"`` is the paper's per-node Stokes drag
     at water's viscosity and no buoyancy; ``"air"`` has no fluid force; ``"water"`` has buoyancy, Morison drag and
-    added mass. A tuple of force models replaces them, e.g. ``(PAPER_DEFECTIVE_DRAG,)``.
+    added mass. A tuple of force models replaces them, e.g. ``(PAPER_DEFECTIVE_DRAG,)``. ``grasped_object`` adds
+    contact, e.g. with the paper's fixed ball :data:`~.contact.PAPER_BALL`.
     """
     from .hydrodynamics import fluid_forces
 
     forces: tuple[ForceModel, ...] = (Gravity(),)
     forces += tuple(medium) if isinstance(medium, tuple) else fluid_forces(medium)
     finger = paper_finger(material, variable_stiffness)
-    return Scene(gripper=GripperDesign(finger), forces=forces, model=model)
+    return Scene(gripper=GripperDesign(finger), forces=forces, model=model, grasped_object=grasped_object)
 
 
 def cantilever_scene(n_nodes: int = 20, clamp: ClampConvention = "accurate", model: RodModel = "planar") -> Scene:

@@ -28,13 +28,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from .validation import check_range
+
 if TYPE_CHECKING:
     from .discretization import Discretization
 
 
 def _check_positive(owner: str, name: str, value: float, unit: str, allow_zero: bool = True) -> None:
-    from .config import check_range  # config imports this module; import late to avoid a cycle
-
     check_range(owner, name, value, unit, 0.0, low_inclusive=allow_zero)
 
 

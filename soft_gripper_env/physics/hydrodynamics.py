@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from .forces import Buoyancy, ForceModel, StokesDrag, _check_positive
+from .validation import check_range
 
 if TYPE_CHECKING:
     from .discretization import Discretization
@@ -53,8 +54,6 @@ class Current:
     """Period of the oscillating part [s]."""
 
     def __post_init__(self) -> None:
-        from .config import check_range
-
         for name in ("velocity", "oscillation"):
             value = tuple(float(v) for v in getattr(self, name))
             if len(value) != 3:

@@ -81,9 +81,9 @@ def newton_iteration(q, q_pred, force, band, mass_term, tolerance_inverse, free,
     """One Newton iteration of an implicit step for every active rod, in place.
 
     With the residual r = M·(q − q_pred)·(1/Δt²) − f (``mass_term`` = M/Δt² per DOF), a rod whose largest
-    ``|r|·tolerance_inverse`` is ≤ 1 is marked converged and inactive; otherwise, if ``solve``, the mass term is added
-    to its band and q += (M/Δt² − ∂f/∂q)⁻¹·(−r). q, q_pred, force: (R, n); band: (R, n, kd+1). Returns the number of
-    rods still active.
+    ``|r|·tolerance_inverse`` over its free DOFs is ≤ 1 is marked converged and inactive; otherwise, if ``solve``, the
+    mass term is added to its band and q += (M/Δt² − ∂f/∂q)⁻¹·(−r) on its free DOFs. q, q_pred, force,
+    ``tolerance_inverse`` and ``free``: (R, n); band: (R, n, kd+1). Returns the number of rods still active.
     """
     n_rods, n = q.shape
     rhs = np.empty(n)
@@ -94,7 +94,7 @@ def newton_iteration(q, q_pred, force, band, mass_term, tolerance_inverse, free,
         largest = 0.0
         for j in range(n):
             rhs[j] = force[r, j] - mass_term[j] * (q[r, j] - q_pred[r, j])
-            scaled = abs(rhs[j]) * tolerance_inverse[j]
+            scaled = abs(rhs[j]) * tolerance_inverse[r, j] if free[r, j] else 0.0
             if not scaled <= largest:  # also catches NaN
                 largest = scaled
         ratio[r] = largest
@@ -108,7 +108,7 @@ def newton_iteration(q, q_pred, force, band, mass_term, tolerance_inverse, free,
         kd = band.shape[2] - 1
         for j in range(n):
             band[r, j, kd] += mass_term[j]
-        solve_banded_symmetric_rod(band[r], rhs, free)
+        solve_banded_symmetric_rod(band[r], rhs, free[r])
         for j in range(n):
             q[r, j] += rhs[j]
         iterations[r] += 1

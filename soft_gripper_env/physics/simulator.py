@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .config import Scene
+from .contact import PENETRATION_TOLERANCE, ContactReport, find_penetrations, reachable, sphere_in_rod_frames
 from .discretization import Discretization
 from .forces import StepContext
 from .linalg import newton_iteration
@@ -48,6 +49,8 @@ class RodState:
     tangent: np.ndarray | None = None
     director: np.ndarray | None = None
     reference_twist: np.ndarray | None = None
+    held: np.ndarray | None = None
+    """Nodes held on the grasped object's surface, (B, F, N) bool; None in a scene without an object."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +64,8 @@ class StepResult:
     """Linear solves (Newton iterations) the slowest finger needed."""
     residual: np.ndarray
     """Final residual: the largest free-DOF residual divided by its tolerance (≤ 1 when converged; dimensionless)."""
+    contact: ContactReport | None = None
+    """Contact reactions of the step; None in a scene without an object."""
 
 
 class Simulator:
@@ -79,6 +84,16 @@ class Simulator:
         self.batch_size = int(batch_size)
         self.disc = Discretization.from_scene(scene)
         self._tolerance_inverse = np.where(self.disc.free, 1.0 / self.disc.residual_scale, 0.0)
+        self._tolerance_inverse_rods = np.tile(self._tolerance_inverse, (self.n_rods, 1))
+        self._first_free_node = 0 if scene.gripper.finger.clamp == "free" else 2
+        self._object = None
+        if scene.grasped_object is not None:
+            planar = scene.model == "planar"
+            centers, radii = sphere_in_rod_frames(scene.grasped_object, self.disc.finger_directions, planar)
+            searched = reachable(scene.grasped_object, self.disc.finger_directions, scene.gripper.finger.length,
+                                 planar)
+            self._object = (np.tile(centers, (self.batch_size, 1)), np.tile(radii, self.batch_size),
+                            np.tile(searched, self.batch_size))
 
     @property
     def n_fingers(self) -> int:
@@ -151,12 +166,14 @@ class Simulator:
         return replace(result, converged=np.zeros_like(result.converged))
 
     def static_residual(self, state: RodState, natural_curvature) -> np.ndarray:
-        """Largest free-DOF force imbalance at rest divided by its Newton tolerance, per gripper (B,)."""
+        """Largest force imbalance at rest on a free DOF (not clamped, not held by contact) divided by its Newton
+        tolerance, per gripper (B,)."""
         R, N, S = self.n_rods, self.disc.n_nodes, self.disc.stride
         q = state.q.reshape(R, N, S)
         force, _ = self._assemble(q, q, q, self._frames(state), self._natural_curvature(natural_curvature),
                                   state.time, 1.0, hessian=False)
-        ratio = np.max(np.abs(force.reshape(R, -1)) * self._tolerance_inverse, axis=1)
+        held = state.held.reshape(R, N) if state.held is not None else np.zeros((R, N), dtype=bool)
+        ratio = np.max(np.abs(force.reshape(R, -1)) * self._tolerance_inverse * self._free_mask(held), axis=1)
         return ratio.reshape(self.batch_size, self.n_fingers).max(axis=1)
 
     def _frames(self, state: RodState):
@@ -188,34 +205,84 @@ class Simulator:
                 model.accumulate(disc, ctx, q[..., :D], velocity, acceleration, force[..., :D], band)
         return force, band
 
-    def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
+    def _free_mask(self, held: np.ndarray) -> np.ndarray:
+        """Free DOFs of every rod, (R, n): the clamp's, less the positions of nodes held by contact."""
         disc = self.disc
-        scene = self.scene
-        R, N, S = self.n_rods, disc.n_nodes, disc.stride
-        n = N * S
-        q_old = state.q.reshape(R, N, S)
-        q_pred = q_old + dt * velocity_old.reshape(R, N, S)
-        q = q_pred.copy()
-        if state.acceleration is not None and velocity_old is state.velocity:
-            q += dt * dt * state.acceleration.reshape(R, N, S)  # start from the extrapolated motion
-        frames_old = self._frames(state)
+        free = np.tile(disc.free, (held.shape[0], 1))
+        free.reshape(held.shape[0], disc.n_nodes, disc.stride)[..., : disc.dim][held] = False
+        return free
+
+    def _newton(self, q, q_old, q_pred, frames_old, kbar, time, dt, free, rods):
+        """Newton's method for the rods where ``rods`` is True; ``q`` (R, N, S) holds the start and receives the
+        solution. Returns per-rod converged, iterations and residual ratio (R,), and the residual
+        M·(q − q_pred)/Δt² − f at the solution (R, n): on held DOFs, the contact reaction."""
+        disc = self.disc
+        R, n = q.shape[0], disc.n_dofs
         mass_term = disc.dof_mass / dt**2
-        tolerance_inverse = self._tolerance_inverse
-        active = np.ones(R, dtype=bool)
+        active = rods.copy()
         converged = np.zeros(R, dtype=bool)
         iterations = np.zeros(R, dtype=np.int64)
         ratio = np.full(R, np.inf)
-        max_iterations = scene.newton.max_iterations
+        max_iterations = self.scene.newton.max_iterations
         q_flat, q_pred_flat = q.reshape(R, n), q_pred.reshape(R, n)
         for it in range(max_iterations + 1):
-            force, band = self._assemble(q, q_old, q_pred, frames_old, kbar, state.time, dt)
-            if not newton_iteration(q_flat, q_pred_flat, force.reshape(R, n), band, mass_term, tolerance_inverse,
-                                    disc.free, active, converged, iterations, ratio, it < max_iterations):
+            force, band = self._assemble(q, q_old, q_pred, frames_old, kbar, time, dt)
+            if not newton_iteration(q_flat, q_pred_flat, force.reshape(R, n), band, mass_term,
+                                    self._tolerance_inverse_rods, free, active, converged, iterations, ratio,
+                                    it < max_iterations):
                 break
+        residual = mass_term * (q_flat - q_pred_flat) - force.reshape(R, n)
+        return converged, iterations, ratio, residual
 
+    def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
+        disc = self.disc
+        R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
+        q_old = state.q.reshape(R, N, S)
+        q_pred = q_old + dt * velocity_old.reshape(R, N, S)
+        q_start = q_pred.copy()
+        if state.acceleration is not None and velocity_old is state.velocity:
+            q_start += dt * dt * state.acceleration.reshape(R, N, S)  # start from the extrapolated motion
+        frames_old = self._frames(state)
+        held = state.held.reshape(R, N).copy() if state.held is not None else np.zeros((R, N), dtype=bool)
+        hold_at = q_old[..., :D].copy()  # nodes already held stay where they are
+        q = q_start.copy()
+        converged = np.zeros(R, dtype=bool)
+        iterations = np.zeros(R, dtype=np.int64)
+        ratio = np.full(R, np.inf)
+        residual = np.zeros((R, disc.n_dofs))
+        corrector = np.zeros(R, dtype=np.int64)
+        changed = np.zeros(R, dtype=bool)
+        rods = np.ones(R, dtype=bool)
+        max_corrector = self.scene.contact.max_corrector_iterations
+        for k in range(max_corrector + 1):
+            q[rods] = q_start[rods]
+            q[..., :D][held & rods[:, None]] = hold_at[held & rods[:, None]]
+            solved = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt, self._free_mask(held), rods)
+            for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
+                total[rods] = part[rods]
+            if self._object is None:
+                break
+            # corrector: release adhesive holds, hold new penetrations, and solve those rods again
+            centers, radii, searched = self._object
+            reaction = residual.reshape(R, N, S)[..., :D] * held[..., None]
+            outward = q[..., :D] - centers[:, None, :]
+            normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
+            adhesive = held & (normal_reaction < 0.0)
+            new_hold = np.zeros((R, N), dtype=bool)
+            found = find_penetrations(q[..., :D], centers, radii, held, searched, self._first_free_node,
+                                      PENETRATION_TOLERANCE, new_hold, hold_at)
+            changed = adhesive.any(axis=1) | (found > 0)
+            if not changed.any() or k == max_corrector:
+                break
+            held = (held & ~adhesive) | new_hold
+            corrector[changed] += 1
+            rods = changed
+
+        B, F = self.batch_size, self.n_fingers
         velocity = ((q - q_old) / dt).reshape(state.q.shape)
         new_state = RodState(q=q.reshape(state.q.shape), velocity=velocity, time=state.time + dt,
-                             acceleration=(velocity - velocity_old) / dt)
+                             acceleration=(velocity - velocity_old) / dt,
+                             held=None if self._object is None else held.reshape(B, F, N))
         if disc.model == "3d":
             tangent = np.empty((R, N - 1, 3))
             director = np.empty((R, N - 1, 3))
@@ -225,11 +292,23 @@ class Simulator:
             new_state = replace(new_state, tangent=tangent.reshape(shape[:2] + (N - 1, 3)),
                                 director=director.reshape(shape[:2] + (N - 1, 3)),
                                 reference_twist=reference_twist.reshape(shape))
-        B, F = self.batch_size, self.n_fingers
+        contact = None
+        if self._object is not None:
+            centers = self._object[0]
+            reaction = np.zeros((R, N, S))
+            reaction[..., :D] = residual.reshape(R, N, S)[..., :D] * held[..., None]
+            outward = q[..., :D] - centers[:, None, :]
+            outward /= np.linalg.norm(outward, axis=-1, keepdims=True)
+            contact = ContactReport(
+                held=held.reshape(B, F, N),
+                reaction=disc.world_positions(reaction.reshape(B, F, N, S)),
+                normal_reaction=np.sum(reaction[..., :D] * outward, axis=-1).reshape(B, F, N),
+                corrector_iterations=corrector.reshape(B, F).max(axis=1),
+                resolved=~changed.reshape(B, F).any(axis=1))
         ratio = np.where(np.isnan(ratio), np.inf, ratio)
         return StepResult(state=new_state, converged=converged.reshape(B, F).all(axis=1),
                           newton_iterations=iterations.reshape(B, F).max(axis=1),
-                          residual=ratio.reshape(B, F).max(axis=1))
+                          residual=ratio.reshape(B, F).max(axis=1), contact=contact)
 
 
 @dataclass(frozen=True, eq=False)
@@ -245,6 +324,8 @@ class Trajectory:
     converged: np.ndarray
     """(K, B)."""
     final_state: RodState
+    contacts: tuple[ContactReport, ...] = ()
+    """The contact report of every step, (K,); empty in a scene without an object."""
 
 
 def run_ramp(scene: Scene, batch_size: int = 1, progress: Callable[[int, int], None] | None = None) -> Trajectory:
@@ -253,14 +334,17 @@ def run_ramp(scene: Scene, batch_size: int = 1, progress: Callable[[int, int], N
     state = sim.initial_state()
     n_steps = scene.n_steps
     positions = [sim.world_positions(state)]
-    iterations, converged = [], []
+    iterations, converged, contacts = [], [], []
     for k in range(n_steps):
         result = sim.step(state, scene.natural_curvature_rate * state.time)
         state = result.state
         positions.append(sim.world_positions(state))
         iterations.append(result.newton_iterations)
         converged.append(result.converged)
+        if result.contact is not None:
+            contacts.append(result.contact)
         if progress is not None:
             progress(k + 1, n_steps)
     return Trajectory(times=np.arange(n_steps + 1) * scene.time_step, positions=np.stack(positions),
-                      newton_iterations=np.stack(iterations), converged=np.stack(converged), final_state=state)
+                      newton_iterations=np.stack(iterations), converged=np.stack(converged), final_state=state,
+                      contacts=tuple(contacts))

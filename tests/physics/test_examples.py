@@ -38,6 +38,19 @@ def test_reproduce_paper_writes_png_and_tip_csv(tmp_path):
     assert (tmp_path / "fig5.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_reproduce_paper_writes_contact_csv(tmp_path):
+    run_script("examples/reproduce_paper.py", "--out", tmp_path, "--model", "planar", "--case", "fig10")
+    with open(tmp_path / "fig10_contacts.csv") as handle:
+        rows = list(csv.reader(handle))
+    assert rows[0] == ["time_s", "finger", "node", "x_m", "y_m", "z_m", "fx_N", "fy_N", "fz_N", "fn_N"]
+    data = np.array(rows[1:], dtype=float)
+    assert len(data) >= 3 and set(data[:, 1]) == {1.0, 2.0, 3.0}
+    assert np.all(data[:, 9] >= 0)  # compression only
+    radius = np.linalg.norm(data[:, 3:6] - np.array([0.0, 0.0, -0.09]), axis=1)
+    np.testing.assert_allclose(radius, 0.065, atol=1e-9)  # held nodes sit on the ball
+    assert (tmp_path / "fig10.csv").exists() and (tmp_path / "fig10.png").stat().st_size > 0
+
+
 def test_reproduce_paper_rejects_unknown_case(tmp_path):
     out = subprocess.run([sys.executable, "examples/reproduce_paper.py", "--out", str(tmp_path), "--case", "fig99"],
                          cwd=ROOT, capture_output=True, text=True)
