@@ -18,10 +18,12 @@ import numpy as np
 
 from .contact import ContactSettings, Sphere
 from .forces import ForceModel, Gravity, StokesDrag
+from .integrators import INTEGRATORS
 from .validation import check_range
 
 ClampConvention = Literal["paper", "accurate", "free"]
 RodModel = Literal["planar", "3d"]
+Integrator = Literal["backward_euler", "implicit_midpoint"]
 
 WATER_VISCOSITY = 1.0e-3
 """Dynamic viscosity of water at about 20 °C [Pa·s]."""
@@ -144,12 +146,18 @@ class NewtonSettings:
     """Stop when every free force residual is below ``relative_tolerance``·EI/L² [N] (EI at the base), and every
     moment residual below ``relative_tolerance``·EI/L [N·m]. Dimensionless."""
     max_iterations: int = 25
+    max_step_halvings: int = 4
+    """When Newton fails, the step is retried as two half steps, each of which may be halved again, up to this many
+    times (at most 2**max_step_halvings substeps). 0 turns adaptive substepping off."""
 
     def __post_init__(self) -> None:
         check_range("NewtonSettings", "relative_tolerance", self.relative_tolerance, "(dimensionless)", 0.0, 1.0)
         if not isinstance(self.max_iterations, (int, np.integer)) or not 1 <= self.max_iterations <= 1000:
             raise ValueError(f"NewtonSettings.max_iterations = {self.max_iterations!r} is outside the allowed "
                              f"range [1, 1000] (integer count)")
+        if not isinstance(self.max_step_halvings, (int, np.integer)) or not 0 <= self.max_step_halvings <= 20:
+            raise ValueError(f"NewtonSettings.max_step_halvings = {self.max_step_halvings!r} is outside the allowed "
+                             f"range [0, 20] (integer count)")
 
 
 @dataclass(frozen=True)
@@ -172,11 +180,19 @@ class Scene:
     newton: NewtonSettings = field(default_factory=NewtonSettings)
     grasped_object: Sphere | None = None
     """The object the fingers may touch; None for no contact at all (no search, no cost)."""
+    integrator: Integrator = "backward_euler"
+    """Time integrator, a name from :data:`~.integrators.INTEGRATORS`."""
     contact: ContactSettings = field(default_factory=ContactSettings)
 
     def __post_init__(self) -> None:
         if self.grasped_object is not None and not isinstance(self.grasped_object, Sphere):
             raise ValueError(f"Scene.grasped_object must be a Sphere or None, got {type(self.grasped_object).__name__}")
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(f"Scene.integrator = {self.integrator!r} is not one of "
+                             f"{', '.join(map(repr, INTEGRATORS))}")
+        if self.grasped_object is not None and self.integrator != "backward_euler":
+            raise ValueError(f"Scene.integrator = {self.integrator!r}: contact with a grasped object is resolved "
+                             f"for 'backward_euler' only, so far")
         if self.model not in ("planar", "3d"):
             raise ValueError(f"Scene.model = {self.model!r} is not one of 'planar', '3d'")
         check_range("Scene", "time_step", self.time_step, "s", 0.0, 10.0)

@@ -24,6 +24,7 @@ from .config import Scene
 from .contact import PENETRATION_TOLERANCE, ContactReport, find_penetrations, reachable, sphere_in_rod_frames
 from .discretization import Discretization
 from .forces import StepContext
+from .integrators import INTEGRATORS
 from .linalg import newton_iteration
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
@@ -66,6 +67,8 @@ class StepResult:
     """Final residual: the largest free-DOF residual divided by its tolerance (≤ 1 when converged; dimensionless)."""
     contact: ContactReport | None = None
     """Contact reactions of the step; None in a scene without an object."""
+    substeps: np.ndarray | None = None
+    """Substeps the step took, (B,): 1 unless Newton failed and the step was halved (adaptive substepping)."""
 
 
 class Simulator:
@@ -83,8 +86,10 @@ class Simulator:
         self.scene = scene
         self.batch_size = int(batch_size)
         self.disc = Discretization.from_scene(scene)
+        self._integrator = INTEGRATORS[scene.integrator]
+        self._subsimulators: dict[int, Simulator] = {}
         self._tolerance_inverse = np.where(self.disc.free, 1.0 / self.disc.residual_scale, 0.0)
-        self._tolerance_inverse_rods = np.tile(self._tolerance_inverse, (self.n_rods, 1))
+        self._tolerance_by_step: dict[float, np.ndarray] = {}
         self._first_free_node = 0 if scene.gripper.finger.clamp == "free" else 2
         self._object = None
         if scene.grasped_object is not None:
@@ -138,8 +143,38 @@ class Simulator:
 
         ``natural_curvature`` is a scalar, (F,) or (B, F). It is held constant over the step.
         """
-        return self._advance(state, self._natural_curvature(natural_curvature), self.scene.time_step,
-                             state.velocity)
+        kbar = self._natural_curvature(natural_curvature)
+        return self._step_adaptive(state, kbar, self.scene.time_step, self.scene.newton.max_step_halvings)
+
+    def _step_adaptive(self, state: RodState, kbar: np.ndarray, dt: float, halvings: int) -> StepResult:
+        """One step of the scene's integrator; grippers whose Newton solve fails take two half steps instead, each
+        of which may be halved again while ``halvings`` allows. Only the failed grippers are re-run."""
+        result = self._integrator.advance(self, state, kbar, dt)
+        result = replace(result, substeps=np.ones(self.batch_size, dtype=np.int64))
+        failed = np.nonzero(~result.converged)[0]
+        if halvings == 0 or failed.size == 0:
+            return result
+        sub = self._subsimulator(failed.size)
+        sub_kbar = kbar.reshape(self.batch_size, -1)[failed].ravel()
+        first = sub._step_adaptive(_take(state, failed), sub_kbar, 0.5 * dt, halvings - 1)
+        second = sub._step_adaptive(first.state, sub_kbar, 0.5 * dt, halvings - 1)
+        merged = replace(_put(result.state, failed, second.state), time=result.state.time)
+        contact = result.contact
+        if contact is not None:
+            contact = _put(contact, failed, replace(
+                second.contact, corrector_iterations=first.contact.corrector_iterations
+                + second.contact.corrector_iterations))
+        return StepResult(state=merged, converged=_set(result.converged, failed, first.converged & second.converged),
+                          newton_iterations=_set(result.newton_iterations, failed,
+                                                 first.newton_iterations + second.newton_iterations),
+                          residual=_set(result.residual, failed, np.maximum(first.residual, second.residual)),
+                          contact=contact, substeps=_set(result.substeps, failed, first.substeps + second.substeps))
+
+    def _subsimulator(self, batch_size: int) -> Simulator:
+        """A simulator of the same scene for ``batch_size`` grippers, kept for reuse."""
+        if batch_size not in self._subsimulators:
+            self._subsimulators[batch_size] = Simulator(self.scene, batch_size)
+        return self._subsimulators[batch_size]
 
     def equilibrium(self, state: RodState, natural_curvature, max_steps: int = 200) -> StepResult:
         """The static equilibrium reached from ``state`` with κ̄ held fixed, by pseudo-transient continuation.
@@ -212,6 +247,17 @@ class Simulator:
         free.reshape(held.shape[0], disc.n_nodes, disc.stride)[..., : disc.dim][held] = False
         return free
 
+    def _newton_tolerance_inverse(self, dt: float) -> np.ndarray:
+        """1/tolerance of every DOF of every rod (R, n) for steps of ``dt``. The tolerance is the scene's, raised
+        where needed above the roundoff of the inertial term M·(q − q_pred)/Δt², which at tiny steps would
+        otherwise make it unreachable."""
+        if dt not in self._tolerance_by_step:
+            disc = self.disc
+            roundoff = 64.0 * np.finfo(float).eps * disc.dof_mass / dt**2 * self.scene.gripper.finger.length
+            tolerance = np.maximum(disc.residual_scale, roundoff)
+            self._tolerance_by_step[dt] = np.tile(np.where(disc.free, 1.0 / tolerance, 0.0), (self.n_rods, 1))
+        return self._tolerance_by_step[dt]
+
     def _newton(self, q, q_old, q_pred, frames_old, kbar, time, dt, free, rods):
         """Newton's method for the rods where ``rods`` is True; ``q`` (R, N, S) holds the start and receives the
         solution. Returns per-rod converged, iterations and residual ratio (R,), and the residual
@@ -228,7 +274,7 @@ class Simulator:
         for it in range(max_iterations + 1):
             force, band = self._assemble(q, q_old, q_pred, frames_old, kbar, time, dt)
             if not newton_iteration(q_flat, q_pred_flat, force.reshape(R, n), band, mass_term,
-                                    self._tolerance_inverse_rods, free, active, converged, iterations, ratio,
+                                    self._newton_tolerance_inverse(dt), free, active, converged, iterations, ratio,
                                     it < max_iterations):
                 break
         residual = mass_term * (q_flat - q_pred_flat) - force.reshape(R, n)
@@ -309,6 +355,24 @@ class Simulator:
         return StepResult(state=new_state, converged=converged.reshape(B, F).all(axis=1),
                           newton_iterations=iterations.reshape(B, F).max(axis=1),
                           residual=ratio.reshape(B, F).max(axis=1), contact=contact)
+
+
+def _take(record, index: np.ndarray):
+    """The grippers ``index`` of a state or contact report (every array field has the batch axis first)."""
+    return replace(record, **{name: value[index] for name, value in vars(record).items()
+                              if isinstance(value, np.ndarray)})
+
+
+def _put(record, index: np.ndarray, part):
+    """A copy of ``record`` whose grippers ``index`` are taken from ``part``."""
+    return replace(record, **{name: _set(value, index, getattr(part, name)) for name, value in vars(record).items()
+                              if isinstance(value, np.ndarray)})
+
+
+def _set(array: np.ndarray, index: np.ndarray, values: np.ndarray) -> np.ndarray:
+    out = array.copy()
+    out[index] = values
+    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -72,7 +72,8 @@ def test_nonconvergence_is_reported_not_raised():
     from soft_gripper_env.physics import NewtonSettings
     from soft_gripper_env.physics.config import replace
 
-    scene = replace(paper_scene(), newton=NewtonSettings(max_iterations=1, relative_tolerance=1e-12))
+    scene = replace(paper_scene(), newton=NewtonSettings(max_iterations=1, relative_tolerance=1e-12,
+                                                        max_step_halvings=0))
     sim = Simulator(scene)
     result = sim.step(sim.initial_state(), -0.5)
     assert not result.converged[0]
