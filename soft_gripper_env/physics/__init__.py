@@ -22,7 +22,7 @@ from .contact import PAPER_BALL, PENETRATION_TOLERANCE, ContactReport, ContactSe
 from .discretization import Discretization
 from .forces import Buoyancy, ForceModel, Gravity, MassProportionalDamping, StepContext, StokesDrag
 from .hydrodynamics import WATER_DENSITY, AddedMass, Current, MorisonDrag, fluid_forces
-from .simulator import RodState, Simulator, StepResult, Trajectory, run_ramp
+from .simulator import NATURAL_CURVATURE_LIMIT, RodState, Simulator, StepResult, Trajectory, run_ramp
 
 __all__ = [
     "ELASTOSIL_MA_4601", "PAPER_DEFECTIVE_DRAG", "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "FingerDesign",
@@ -30,5 +30,5 @@ __all__ = [
     "paper_scene", "Discretization", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping", "StokesDrag",
     "RodState", "Simulator", "StepResult", "Trajectory", "run_ramp", "StepContext", "WATER_DENSITY", "AddedMass",
     "Current", "MorisonDrag", "fluid_forces", "PAPER_BALL", "PENETRATION_TOLERANCE", "ContactReport",
-    "ContactSettings", "Sphere",
+    "ContactSettings", "Sphere", "NATURAL_CURVATURE_LIMIT",
 ]

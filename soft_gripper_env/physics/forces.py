@@ -60,6 +60,10 @@ class ForceModel:
         """Add this model's force [N] to ``force`` and its negated Jacobian to ``system_band``."""
         raise NotImplementedError
 
+    def potential_energy(self, disc: Discretization, positions: np.ndarray) -> np.ndarray | None:
+        """Potential energy of a conservative force per rod [J], (R,); None for a force that has none."""
+        return None
+
 
 @dataclass(frozen=True)
 class Gravity(ForceModel):
@@ -73,6 +77,9 @@ class Gravity(ForceModel):
 
     def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
         force[..., disc.vertical_axis] -= disc.node_mass * self.acceleration
+
+    def potential_energy(self, disc, positions):
+        return positions[..., disc.vertical_axis] @ (disc.node_mass * self.acceleration)
 
 
 @dataclass(frozen=True)
@@ -90,6 +97,9 @@ class Buoyancy(ForceModel):
 
     def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
         force[..., disc.vertical_axis] += disc.node_volume * (self.fluid_density * self.acceleration)
+
+    def potential_energy(self, disc, positions):
+        return -positions[..., disc.vertical_axis] @ (disc.node_volume * (self.fluid_density * self.acceleration))
 
 
 @dataclass(frozen=True)

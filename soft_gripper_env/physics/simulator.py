@@ -29,6 +29,11 @@ from .linalg import newton_iteration
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
 
+NATURAL_CURVATURE_LIMIT = 2.0
+"""Largest |κ̄| a step accepts (dimensionless): a natural turning angle of 90° per node, 2·atan(κ̄/2). The integrated
+curvature κ = 2·tan(φ/2) is singular at φ = 180°, and a finger already curls 18 × 90° = 1620° at this limit. The
+same clip as dismech-rl's."""
+
 
 @dataclass(frozen=True, eq=False)
 class RodState:
@@ -127,6 +132,33 @@ class Simulator:
         """Node positions in the world frame [m], (B, F, N, 3)."""
         return self.disc.world_positions(state.q)
 
+    def mechanical_energy(self, state: RodState, natural_curvature) -> np.ndarray:
+        """Kinetic + elastic + gravitational and buoyant potential energy of each gripper [J], (B,).
+
+        The kinetic energy is that of the rods' own lumped masses (and twist inertia); water carried as added mass
+        is not counted.
+        """
+        disc = self.disc
+        R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
+        q = np.ascontiguousarray(state.q.reshape(R, N, S))
+        kbar = self._natural_curvature(natural_curvature)
+        force = np.zeros((R, N, S))
+        band = np.zeros((R, N * S, disc.band_width + 1))
+        if disc.model == "3d":
+            energy = rod3d_elastic(q, *self._frames(state), disc.rest_edge_length, disc.stretch_stiffness,
+                                   disc.bend_stiffness, disc.twist_stiffness, disc.voronoi_length, kbar, force, band,
+                                   False)
+        else:
+            energy = planar_elastic(q, disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness,
+                                    disc.voronoi_length, kbar, force, band, False)
+        velocity = state.velocity.reshape(R, -1)
+        energy = energy + 0.5 * (velocity**2) @ disc.dof_mass
+        for model in self.scene.forces:
+            potential = model.potential_energy(disc, q[..., :D])
+            if potential is not None:
+                energy = energy + potential
+        return energy.reshape(self.batch_size, self.n_fingers).sum(axis=1)
+
     def _natural_curvature(self, natural_curvature) -> np.ndarray:
         kbar = np.asarray(natural_curvature, dtype=float)
         try:
@@ -136,6 +168,10 @@ class Simulator:
                              f"({self.n_fingers},) or (B, F) = ({self.batch_size}, {self.n_fingers})") from None
         if not np.all(np.isfinite(kbar)):
             raise ValueError("natural_curvature (dimensionless) must be finite")
+        if np.abs(kbar).max() > NATURAL_CURVATURE_LIMIT:
+            raise ValueError(f"natural_curvature = {kbar.flat[np.abs(kbar).argmax()]:g} (dimensionless) is outside "
+                             f"the allowed range [−{NATURAL_CURVATURE_LIMIT:g}, {NATURAL_CURVATURE_LIMIT:g}]: "
+                             f"κ = 2·tan(φ/2) is singular at a turning angle φ = 180°")
         return np.ascontiguousarray(kbar).reshape(-1)
 
     def step(self, state: RodState, natural_curvature) -> StepResult:
