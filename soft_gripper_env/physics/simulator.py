@@ -95,6 +95,8 @@ class Simulator:
         self._subsimulators: dict[int, Simulator] = {}
         self._tolerance_inverse = np.where(self.disc.free, 1.0 / self.disc.residual_scale, 0.0)
         self._tolerance_by_step: dict[float, np.ndarray] = {}
+        self._clamp_free = np.tile(self.disc.free, (self.n_rods, 1))
+        self._all_rods = np.ones(self.n_rods, dtype=bool)
         self._first_free_node = 0 if scene.gripper.finger.clamp == "free" else 2
         self._object = None
         if scene.grasped_object is not None:
@@ -160,6 +162,9 @@ class Simulator:
         return energy.reshape(self.batch_size, self.n_fingers).sum(axis=1)
 
     def _natural_curvature(self, natural_curvature) -> np.ndarray:
+        """κ̄ per rod (R,), from a scalar, (F,) or (B, F), checked."""
+        if isinstance(natural_curvature, (float, int)) and abs(natural_curvature) <= NATURAL_CURVATURE_LIMIT:
+            return np.full(self.n_rods, float(natural_curvature))  # the common scalar case, fast
         kbar = np.asarray(natural_curvature, dtype=float)
         try:
             kbar = np.broadcast_to(kbar, (self.batch_size, self.n_fingers))
@@ -279,7 +284,9 @@ class Simulator:
     def _free_mask(self, held: np.ndarray) -> np.ndarray:
         """Free DOFs of every rod, (R, n): the clamp's, less the positions of nodes held by contact."""
         disc = self.disc
-        free = np.tile(disc.free, (held.shape[0], 1))
+        if not held.any():
+            return self._clamp_free  # never written to
+        free = self._clamp_free.copy()
         free.reshape(held.shape[0], disc.n_nodes, disc.stride)[..., : disc.dim][held] = False
         return free
 
@@ -316,6 +323,42 @@ class Simulator:
         residual = mass_term * (q_flat - q_pred_flat) - force.reshape(R, n)
         return converged, iterations, ratio, residual
 
+    def _solve_with_contact(self, state, q_start, q_old, q_pred, frames_old, kbar, dt):
+        """The predictor–corrector (see :mod:`.contact`): solve, release adhesive holds, hold new penetrations, and
+        solve the rods that changed again, until none does or the corrector's budget is spent."""
+        disc = self.disc
+        R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
+        held = state.held.reshape(R, N).copy() if state.held is not None else np.zeros((R, N), dtype=bool)
+        hold_at = q_old[..., :D].copy()  # nodes already held stay where they are
+        q = q_start.copy()
+        converged = np.zeros(R, dtype=bool)
+        iterations = np.zeros(R, dtype=np.int64)
+        ratio = np.full(R, np.inf)
+        residual = np.zeros((R, disc.n_dofs))
+        corrector = np.zeros(R, dtype=np.int64)
+        rods = self._all_rods
+        centers, radii, searched = self._object
+        for k in range(self.scene.contact.max_corrector_iterations + 1):
+            q[rods] = q_start[rods]
+            q[..., :D][held & rods[:, None]] = hold_at[held & rods[:, None]]
+            solved = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt, self._free_mask(held), rods)
+            for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
+                total[rods] = part[rods]
+            reaction = residual.reshape(R, N, S)[..., :D] * held[..., None]
+            outward = q[..., :D] - centers[:, None, :]
+            normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
+            adhesive = held & (normal_reaction < 0.0)
+            new_hold = np.zeros((R, N), dtype=bool)
+            found = find_penetrations(q[..., :D], centers, radii, held, searched, self._first_free_node,
+                                      PENETRATION_TOLERANCE, new_hold, hold_at)
+            changed = adhesive.any(axis=1) | (found > 0)
+            if not changed.any() or k == self.scene.contact.max_corrector_iterations:
+                break
+            held = (held & ~adhesive) | new_hold
+            corrector[changed] += 1
+            rods = changed
+        return q, held, changed, corrector, converged, iterations, ratio, residual
+
     def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
         disc = self.disc
         R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
@@ -325,46 +368,20 @@ class Simulator:
         if state.acceleration is not None and velocity_old is state.velocity:
             q_start += dt * dt * state.acceleration.reshape(R, N, S)  # start from the extrapolated motion
         frames_old = self._frames(state)
-        held = state.held.reshape(R, N).copy() if state.held is not None else np.zeros((R, N), dtype=bool)
-        hold_at = q_old[..., :D].copy()  # nodes already held stay where they are
-        q = q_start.copy()
-        converged = np.zeros(R, dtype=bool)
-        iterations = np.zeros(R, dtype=np.int64)
-        ratio = np.full(R, np.inf)
-        residual = np.zeros((R, disc.n_dofs))
-        corrector = np.zeros(R, dtype=np.int64)
-        changed = np.zeros(R, dtype=bool)
-        rods = np.ones(R, dtype=bool)
-        max_corrector = self.scene.contact.max_corrector_iterations
-        for k in range(max_corrector + 1):
-            q[rods] = q_start[rods]
-            q[..., :D][held & rods[:, None]] = hold_at[held & rods[:, None]]
-            solved = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt, self._free_mask(held), rods)
-            for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
-                total[rods] = part[rods]
-            if self._object is None:
-                break
-            # corrector: release adhesive holds, hold new penetrations, and solve those rods again
-            centers, radii, searched = self._object
-            reaction = residual.reshape(R, N, S)[..., :D] * held[..., None]
-            outward = q[..., :D] - centers[:, None, :]
-            normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
-            adhesive = held & (normal_reaction < 0.0)
-            new_hold = np.zeros((R, N), dtype=bool)
-            found = find_penetrations(q[..., :D], centers, radii, held, searched, self._first_free_node,
-                                      PENETRATION_TOLERANCE, new_hold, hold_at)
-            changed = adhesive.any(axis=1) | (found > 0)
-            if not changed.any() or k == max_corrector:
-                break
-            held = (held & ~adhesive) | new_hold
-            corrector[changed] += 1
-            rods = changed
+        if self._object is None:
+            q = q_start
+            held = changed = corrector = None
+            converged, iterations, ratio, residual = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt,
+                                                                  self._clamp_free, self._all_rods)
+        else:
+            q, held, changed, corrector, converged, iterations, ratio, residual = self._solve_with_contact(
+                state, q_start, q_old, q_pred, frames_old, kbar, dt)
 
         B, F = self.batch_size, self.n_fingers
         velocity = ((q - q_old) / dt).reshape(state.q.shape)
         new_state = RodState(q=q.reshape(state.q.shape), velocity=velocity, time=state.time + dt,
                              acceleration=(velocity - velocity_old) / dt,
-                             held=None if self._object is None else held.reshape(B, F, N))
+                             held=None if held is None else held.reshape(B, F, N))
         if disc.model == "3d":
             tangent = np.empty((R, N - 1, 3))
             director = np.empty((R, N - 1, 3))
@@ -375,7 +392,7 @@ class Simulator:
                                 director=director.reshape(shape[:2] + (N - 1, 3)),
                                 reference_twist=reference_twist.reshape(shape))
         contact = None
-        if self._object is not None:
+        if held is not None:
             centers = self._object[0]
             reaction = np.zeros((R, N, S))
             reaction[..., :D] = residual.reshape(R, N, S)[..., :D] * held[..., None]
