@@ -70,10 +70,10 @@ class StepResult:
     """Linear solves (Newton iterations) the slowest finger needed."""
     residual: np.ndarray
     """Final residual: the largest free-DOF residual divided by its tolerance (≤ 1 when converged; dimensionless)."""
+    substeps: np.ndarray
+    """Substeps the step took, (B,): 1 unless Newton failed and the step was halved (adaptive substepping)."""
     contact: ContactReport | None = None
     """Contact reactions of the step; None in a scene without an object."""
-    substeps: np.ndarray | None = None
-    """Substeps the step took, (B,): 1 unless Newton failed and the step was halved (adaptive substepping)."""
 
 
 class Simulator:
@@ -191,7 +191,6 @@ class Simulator:
         """One step of the scene's integrator; grippers whose Newton solve fails take two half steps instead, each
         of which may be halved again while ``halvings`` allows. Only the failed grippers are re-run."""
         result = self._integrator.advance(self, state, kbar, dt)
-        result = replace(result, substeps=np.ones(self.batch_size, dtype=np.int64))
         failed = np.nonzero(~result.converged)[0]
         if halvings == 0 or failed.size == 0:
             return result
@@ -407,7 +406,8 @@ class Simulator:
         ratio = np.where(np.isnan(ratio), np.inf, ratio)
         return StepResult(state=new_state, converged=converged.reshape(B, F).all(axis=1),
                           newton_iterations=iterations.reshape(B, F).max(axis=1),
-                          residual=ratio.reshape(B, F).max(axis=1), contact=contact)
+                          residual=ratio.reshape(B, F).max(axis=1), contact=contact,
+                          substeps=np.ones(B, dtype=np.int64))
 
 
 def _take(record, index: np.ndarray):
