@@ -10,12 +10,10 @@ planar run ≤ 30 ms, 3-D run ≤ 100 ms, batched planar ≤ 50 µs per gripper-
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
-from pathlib import Path
 
-from _timing import save_plot, time_ramp
+from _timing import parse_arguments, save_plot, time_ramp
 
 from soft_gripper_env.physics import paper_scene
 
@@ -30,13 +28,7 @@ def time_batched(batch_size: int, repeats: int) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--json", type=Path, help="write the results to this JSON file")
-    parser.add_argument("--plot", type=Path, default=Path("out/core_speed.png"), help="plot path (PNG)")
-    parser.add_argument("--repeats", type=int, default=5, help="timed repetitions; the best counts (default 5)")
-    args = parser.parse_args(argv)
-    if args.repeats < 1:
-        parser.error(f"--repeats = {args.repeats} must be at least 1")
+    args = parse_arguments(__doc__, "core_speed.png", argv)
 
     print("timing the paper scene (3 fingers, 100 steps, N = 20), single-threaded ...", flush=True)
     planar_s = time_ramp(paper_scene("planar"), 1, args.repeats)[0]

@@ -9,12 +9,10 @@ the fluid forces it lists, so air is the floor.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
-from pathlib import Path
 
-from _timing import save_plot, time_ramp
+from _timing import parse_arguments, save_plot, time_ramp
 
 from soft_gripper_env.physics import paper_scene
 
@@ -30,13 +28,7 @@ def time_run(model: str, medium: str, batch_size: int, repeats: int) -> tuple[fl
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--json", type=Path, help="write the results to this JSON file")
-    parser.add_argument("--plot", type=Path, default=Path("out/medium_cost.png"), help="plot path (PNG)")
-    parser.add_argument("--repeats", type=int, default=5, help="timed repetitions; the best counts (default 5)")
-    args = parser.parse_args(argv)
-    if args.repeats < 1:
-        parser.error(f"--repeats = {args.repeats} must be at least 1")
+    args = parse_arguments(__doc__, "medium_cost.png", argv)
 
     results = {}
     for model, batch in CONFIGURATIONS:

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from test_derivatives import band_to_dense, evaluate_force_model
+from test_derivatives import band_to_dense, evaluate_force_model, finite_difference_jacobian
 
 from soft_gripper_env.physics import (
     WATER_DENSITY,
@@ -59,12 +59,8 @@ def test_morison_velocity_jacobian(model):
 
     f0, jacobian = force_at(q)
     assert np.abs(f0).max() > 1e-3
-    h = 1e-8
-    for j in range(q.size):
-        dq = np.zeros(q.size)
-        dq[j] = h
-        column = -(force_at(q + dq.reshape(q.shape))[0] - force_at(q - dq.reshape(q.shape))[0]) / (2 * h)
-        np.testing.assert_allclose(jacobian[:, j], column, rtol=1e-5, atol=1e-7 * np.abs(jacobian).max())
+    fd = finite_difference_jacobian(lambda x: force_at(x)[0], q, 1e-8)
+    np.testing.assert_allclose(jacobian, fd, rtol=1e-5, atol=1e-7 * np.abs(jacobian).max())
 
 
 @pytest.mark.parametrize("model", ["planar", "3d"])
@@ -78,13 +74,8 @@ def test_added_mass_jacobian(model):
     model_ = AddedMass()
     f0, jacobian = evaluate_force_model(model_, disc, q, q_old, q_pred, 0.01)
     assert np.abs(f0).max() > 0
-    h = 1e-7
-    for j in range(q.size):
-        dq = np.zeros(q.size)
-        dq[j] = h
-        column = -(evaluate_force_model(model_, disc, q + dq.reshape(q.shape), q_old, q_pred, 0.01)[0]
-                   - evaluate_force_model(model_, disc, q - dq.reshape(q.shape), q_old, q_pred, 0.01)[0]) / (2 * h)
-        np.testing.assert_allclose(jacobian[:, j], column, rtol=1e-6, atol=1e-9 * np.abs(jacobian).max())
+    fd = finite_difference_jacobian(lambda x: evaluate_force_model(model_, disc, x, q_old, q_pred, 0.01)[0], q, 1e-7)
+    np.testing.assert_allclose(jacobian, fd, rtol=1e-6, atol=1e-9 * np.abs(jacobian).max())
     # the added-mass matrix is positive semi-definite: it only ever adds inertia
     assert np.linalg.eigvalsh(jacobian).min() > -1e-9 * np.abs(jacobian).max()
 
