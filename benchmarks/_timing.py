@@ -15,7 +15,8 @@ from soft_gripper_env.physics import Scene, Trajectory, run_ramp  # noqa: E402
 
 
 def time_ramp(scene: Scene, batch_size: int, repeats: int) -> tuple[float, Trajectory]:
-    """Best wall time [s] of ``repeats`` whole scripted runs after a warm-up run (compilation excluded)."""
+    """Best wall time [s] of ``repeats`` whole scripted runs after a warm-up run (compilation excluded), and the
+    warm-up's trajectory. With ``repeats`` = 0 it only warms up (the time is then infinite)."""
     trajectory = run_ramp(scene, batch_size)
     best = float("inf")
     for _ in range(repeats):

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -67,13 +68,26 @@ class Current:
         """Current velocity at ``time`` [m/s], (3,)."""
         return np.asarray(self.velocity) + np.asarray(self.oscillation) * math.sin(2 * math.pi * time / self.period)
 
+    @property
+    def still(self) -> bool:
+        """Whether there is no current at all."""
+        return not any(self.velocity) and not any(self.oscillation)
+
 
 def _edge_diameter(disc: Discretization) -> np.ndarray:
     return disc.node_radius[:-1] + disc.node_radius[1:]
 
 
-def _rod_current(disc: Discretization, current: np.ndarray, n_rods: int) -> np.ndarray:
+@lru_cache(maxsize=64)
+def _still_water(dim: int, n_rods: int) -> np.ndarray:
+    return np.zeros((n_rods, dim))
+
+
+def _rod_current(disc: Discretization, current: Current, time: float, n_rods: int) -> np.ndarray:
     """The current in each rod's coordinates, (R, D): world (3-D) or the finger's vertical plane (planar)."""
+    if current.still:
+        return _still_water(disc.dim, n_rods)
+    current = current.at(time)
     if disc.dim == 3:
         return np.broadcast_to(current, (n_rods, 3))
     in_plane = np.stack([disc.finger_directions @ current, np.full(len(disc.finger_directions), current[2])], axis=1)
@@ -102,13 +116,16 @@ class MorisonDrag(ForceModel):
             raise ValueError(f"MorisonDrag.current must be a Current, got {type(self.current).__name__}")
 
     def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
-        diameter = _edge_diameter(disc)
-        normal = 0.5 * self.fluid_density * self.normal_coefficient * diameter * disc.rest_edge_length
-        tangential = 0.5 * self.fluid_density * self.tangential_coefficient * math.pi * diameter \
-            * disc.rest_edge_length
-        current = _rod_current(disc, self.current.at(ctx.time), positions.shape[0])
+        normal, tangential = self.edge_coefficients(disc)
+        current = _rod_current(disc, self.current, ctx.time, positions.shape[0])
         morison_drag(positions, velocities, current, normal, tangential, ctx.velocity_derivative, disc.stride, force,
                      system_band)
+
+    @lru_cache(maxsize=16)  # noqa: B019 - frozen, hashable models and discretizations; a handful per process
+    def edge_coefficients(self, disc: Discretization) -> tuple[np.ndarray, np.ndarray]:
+        """½·ρ_w·C_n·D·l̄ and ½·ρ_w·C_t·π·D·l̄ of every edge [kg/m], (N − 1,) each."""
+        half_density_area = 0.5 * self.fluid_density * _edge_diameter(disc) * disc.rest_edge_length
+        return half_density_area * self.normal_coefficient, half_density_area * (math.pi * self.tangential_coefficient)
 
 
 @dataclass(frozen=True)
@@ -124,6 +141,7 @@ class AddedMass(ForceModel):
         _check_positive("AddedMass", "coefficient", self.coefficient, "(dimensionless)")
         _check_positive("AddedMass", "fluid_density", self.fluid_density, "kg/m³")
 
+    @lru_cache(maxsize=16)  # noqa: B019 - frozen, hashable models and discretizations; a handful per process
     def edge_mass(self, disc: Discretization) -> np.ndarray:
         """Added mass of each edge for motion normal to it [kg], (N − 1,)."""
         return self.coefficient * self.fluid_density * math.pi / 4 * _edge_diameter(disc) ** 2 * disc.rest_edge_length

@@ -108,8 +108,9 @@ def test_medium_cost_benchmark(tmp_path):
     stdout = run_script("benchmarks/medium_cost.py", "--repeats", "1", "--json", tmp_path / "m.json", "--plot",
                         tmp_path / "m.png")
     result = json.loads((tmp_path / "m.json").read_text())
-    assert set(result) == {"planar_B1", "3d_B1", "planar_B64"}
-    assert set(result["planar_B1"]) == {"air", "stokes", "water"}
+    assert set(result) == {"planar_B1", "3d_B1", "planar_B64", "planar_vs_3d_max_distance_m"}
+    assert set(result["planar_B1"]) == {"air", "stokes", "water", "stokes+ball"}
+    assert max(result["planar_vs_3d_max_distance_m"].values()) < 1e-6  # the models agree where both apply
     assert "× air" in stdout and (tmp_path / "m.png").stat().st_size > 0
 
 
