@@ -446,14 +446,16 @@ class Trajectory:
 
 
 def run_ramp(scene: Scene, batch_size: int = 1, progress: Callable[[int, int], None] | None = None) -> Trajectory:
-    """Run the scene's scripted ramp κ̄(t) = rate·t (t at the start of each step) for its duration."""
+    """Run the scene's scripted ramp κ̄(t) = rate·t (t at the start of each step) for its duration. The ramp
+    saturates at ±:data:`NATURAL_CURVATURE_LIMIT`, as a pneumatic finger saturates at its maximum pressure."""
     sim = Simulator(scene, batch_size)
     state = sim.initial_state()
     n_steps = scene.n_steps
     positions = [sim.world_positions(state)]
     iterations, converged, contacts = [], [], []
     for k in range(n_steps):
-        result = sim.step(state, scene.natural_curvature_rate * state.time)
+        kbar = min(max(scene.natural_curvature_rate * state.time, -NATURAL_CURVATURE_LIMIT), NATURAL_CURVATURE_LIMIT)
+        result = sim.step(state, kbar)
         state = result.state
         positions.append(sim.world_positions(state))
         iterations.append(result.newton_iterations)

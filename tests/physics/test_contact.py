@@ -142,3 +142,30 @@ def test_batch_members_with_contact_are_independent():
 def test_bad_contact_configuration_raises(make, pattern):
     with pytest.raises(ValueError, match=pattern):
         make()
+
+
+def test_halved_steps_keep_contact_consistent():
+    """Newton limited to 3 iterations at Δt = 0.02 s fails some steps while the fingers touch the ball; the halved
+    steps still end with no penetration, no adhesion, and the held nodes reported for the whole step."""
+    scene = replace(paper_scene("planar", material=SOFT_TRANSLUCENT_SILICONE, grasped_object=PAPER_BALL),
+                    time_step=0.02, newton=replace(paper_scene().newton, max_iterations=3))
+    sim = Simulator(scene, batch_size=2)
+    state = sim.initial_state()
+    rates = np.array([[-0.15] * 3, [-0.3] * 3])
+    halved_in_contact = False
+    for _ in range(50):
+        result = sim.step(state, rates * state.time)
+        assert result.converged.all() and result.contact.resolved.all()
+        state = result.state
+        np.testing.assert_array_equal(result.contact.held, state.held)
+        assert np.all(result.contact.normal_reaction[state.held] >= 0)
+        halved_in_contact |= bool((result.substeps[state.held.any(axis=(1, 2))] > 1).any())
+        distance = np.linalg.norm(sim.world_positions(state) - np.asarray(PAPER_BALL.center), axis=-1)
+        assert distance.min() >= PAPER_BALL.radius - PENETRATION_TOLERANCE
+    assert halved_in_contact
+
+
+def test_scripted_ramp_saturates_at_the_curvature_limit():
+    scene = replace(paper_scene(), duration=15.0, time_step=0.05)  # κ̄ would reach −2.25
+    run = run_ramp(scene)
+    assert run.converged.all() and np.isfinite(run.positions).all()
