@@ -18,7 +18,7 @@ from .config import (
     paper_finger,
     paper_scene,
 )
-from .contact import PAPER_BALL, PENETRATION_TOLERANCE, ContactReport, ContactSettings, Sphere
+from .contact import PAPER_BALL, PENETRATION_TOLERANCE, Capsule, ContactReport, ContactSettings, Sphere
 from .discretization import Discretization
 from .forces import Buoyancy, ForceModel, Gravity, MassProportionalDamping, StepContext, StokesDrag
 from .hydrodynamics import WATER_DENSITY, AddedMass, Current, MorisonDrag, fluid_forces
@@ -30,5 +30,5 @@ __all__ = [
     "paper_scene", "Discretization", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping", "StokesDrag",
     "RodState", "Simulator", "StepResult", "Trajectory", "run_ramp", "StepContext", "WATER_DENSITY", "AddedMass",
     "Current", "MorisonDrag", "fluid_forces", "PAPER_BALL", "PENETRATION_TOLERANCE", "ContactReport",
-    "ContactSettings", "Sphere", "NATURAL_CURVATURE_LIMIT",
+    "ContactSettings", "Sphere", "Capsule", "NATURAL_CURVATURE_LIMIT",
 ]

@@ -16,7 +16,7 @@ from typing import Literal
 
 import numpy as np
 
-from .contact import ContactSettings, Sphere
+from .contact import Capsule, ContactSettings, GraspedObject, Sphere
 from .forces import ForceModel, Gravity, StokesDrag
 from .integrators import INTEGRATORS
 from .validation import check_range
@@ -178,15 +178,20 @@ class Scene:
     """Rate of the scripted natural-curvature ramp κ̄(t) = rate·t [1/s] (κ̄ is dimensionless integrated curvature;
     negative curls the fingers toward −z)."""
     newton: NewtonSettings = field(default_factory=NewtonSettings)
-    grasped_object: Sphere | None = None
-    """The object the fingers may touch; None for no contact at all (no search, no cost)."""
+    grasped_object: GraspedObject | None = None
+    """The object the fingers may touch (a :class:`Sphere`, or a :class:`Capsule` in 3-D); None for no contact at
+    all (no search, no cost)."""
     integrator: Integrator = "backward_euler"
     """Time integrator, a name from :data:`~.integrators.INTEGRATORS`."""
     contact: ContactSettings = field(default_factory=ContactSettings)
 
     def __post_init__(self) -> None:
-        if self.grasped_object is not None and not isinstance(self.grasped_object, Sphere):
-            raise ValueError(f"Scene.grasped_object must be a Sphere or None, got {type(self.grasped_object).__name__}")
+        if self.grasped_object is not None and not isinstance(self.grasped_object, (Sphere, Capsule)):
+            raise ValueError(f"Scene.grasped_object must be a Sphere, a Capsule or None, got "
+                             f"{type(self.grasped_object).__name__}")
+        if isinstance(self.grasped_object, Capsule) and self.model != "3d":
+            raise ValueError("Scene.grasped_object: contact with a Capsule needs Scene.model = '3d' (a vertical finger "
+                             "plane cuts a capsule in a general curve)")
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"Scene.integrator = {self.integrator!r} is not one of "
                              f"{', '.join(map(repr, INTEGRATORS))}")
@@ -232,7 +237,7 @@ Medium = Literal["air", "stokes", "water"]
 
 def paper_scene(model: RodModel = "planar", *, material: Material = ELASTOSIL_MA_4601,
                 variable_stiffness: bool = False, medium: Medium | tuple[ForceModel, ...] = "stokes",
-                grasped_object: Sphere | None = None) -> Scene:
+                grasped_object: GraspedObject | None = None) -> Scene:
     """The paper's three-finger scene, exactly as ``physics.md`` §1 gives it.
 
     The ramp κ̄ = −0.15·t, backward Euler at Δt = 0.01 s for T = 1 s, the paper's clamp, and full weight. ``medium``

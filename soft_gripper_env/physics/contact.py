@@ -9,8 +9,10 @@ released and the step solved again. The corrector repeats until nothing changes,
 released, so the contact transmits tangential force without sliding (a frictional-sliding model would replace the
 stick rule here). The base clamp is kept throughout.
 
-Contact is node-based: an edge between two nodes outside the object may still cut through it, by at most the sag of
-an edge of length Δl over the object's curvature, Δl²/(8·R) (0.07 mm for the paper's finger and ball).
+Objects are fixed in space: a :class:`Sphere`, or a :class:`Capsule` (the points within a radius of a segment; a
+sphere is a capsule of zero length, and one kernel serves both). Contact is node-based: an edge between two nodes
+outside the object may still cut through it, by at most the sag of an edge of length Δl over the object's
+curvature, Δl²/(8·R) (0.07 mm for the paper's finger and ball).
 
 In the planar model a finger sees the object's section by its own vertical plane: a sphere of radius R whose centre
 is a distance d from the plane is a circle of radius √(R² − d²) there. The finger is rigid out of its plane, so
@@ -50,6 +52,41 @@ class Sphere:
             check_range("Sphere", "center", c, "m", -1e3, 1e3)
         object.__setattr__(self, "center", center)
 
+
+    @property
+    def segment(self) -> tuple[np.ndarray, np.ndarray]:
+        """The object as a swept sphere: the segment its surface is at ``radius`` from (a point, for a sphere)."""
+        return np.asarray(self.center), np.asarray(self.center)
+
+
+@dataclass(frozen=True)
+class Capsule:
+    """A rigid capsule (a cylinder with hemispherical ends), fixed in space: every point within ``radius`` of the
+    segment from ``start`` to ``end``. Contact with it needs the 3-D rod model."""
+
+    radius: float
+    """Radius [m]."""
+    start: tuple[float, float, float]
+    """One end of the axis, world frame [m]."""
+    end: tuple[float, float, float]
+    """The other end of the axis, world frame [m]."""
+
+    def __post_init__(self) -> None:
+        check_range("Capsule", "radius", self.radius, "m", 0.0)
+        for name in ("start", "end"):
+            point = tuple(float(c) for c in getattr(self, name))
+            if len(point) != 3:
+                raise ValueError(f"Capsule.{name} = {getattr(self, name)!r} must have 3 components [m]")
+            for c in point:
+                check_range("Capsule", name, c, "m", -1e3, 1e3)
+            object.__setattr__(self, name, point)
+
+    @property
+    def segment(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.asarray(self.start), np.asarray(self.end)
+
+
+GraspedObject = Sphere | Capsule
 
 PAPER_BALL = Sphere(radius=0.065, center=(0.0, 0.0, -0.09))
 """The paper's ball: R = 0.065 m, centre (0, 0, −0.09) m, fixed."""
@@ -93,48 +130,74 @@ class ContactReport:
         return self.reaction.sum(axis=(1, 2))
 
 
-def sphere_in_rod_frames(sphere: Sphere, finger_directions: np.ndarray, planar: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Centre (F, D) and radius (F,) of the object as each finger's rod sees it [m] (see the module notes)."""
-    center = np.asarray(sphere.center)
+def object_in_rod_frames(obj: GraspedObject, finger_directions: np.ndarray,
+                         planar: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The object as each finger's rod sees it: its segment's ends (F, D) and (F, D), and its radius (F,) [m].
+
+    In 3-D that is the object itself. In the planar model a sphere's section by the finger's plane is a circle (a
+    segment of zero length); see the module notes.
+    """
+    start, end = obj.segment
     n_fingers = len(finger_directions)
     if not planar:
-        return np.tile(center, (n_fingers, 1)), np.full(n_fingers, sphere.radius)
+        return np.tile(start, (n_fingers, 1)), np.tile(end, (n_fingers, 1)), np.full(n_fingers, obj.radius)
+    center = start  # a sphere: the planar model refuses a capsule (Scene validation)
     plane_normals = np.stack([-finger_directions[:, 1], finger_directions[:, 0], np.zeros(n_fingers)], axis=1)
     distance = plane_normals @ center
-    radius = np.sqrt(np.maximum(sphere.radius**2 - distance**2, 0.0))
+    radius = np.sqrt(np.maximum(obj.radius**2 - distance**2, 0.0))
     centers = np.stack([finger_directions @ center, np.full(n_fingers, center[2])], axis=1)
-    return centers, radius
+    return centers, centers, radius
 
 
-def reachable(sphere: Sphere, finger_directions: np.ndarray, length: float, planar: bool) -> np.ndarray:
-    """Which fingers can touch the object at all: those whose base (the palm centre) lies within L + R of the
-    section's centre (F,) bool. Contact is never searched for the others."""
-    centers, radius = sphere_in_rod_frames(sphere, finger_directions, planar)
-    return (np.linalg.norm(centers, axis=1) < length + radius) & (radius > 0)
+def closest_points(positions: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """The point of each rod's segment (start, end: (R, D)) closest to each node (R, N, D) [m]."""
+    axis = end - start
+    length2 = np.maximum(np.sum(axis**2, axis=-1), 1e-300)
+    along = np.clip(np.einsum("rnd,rd->rn", positions - start[:, None, :], axis) / length2[:, None], 0.0, 1.0)
+    return start[:, None, :] + along[..., None] * axis[:, None, :]
+
+
+def reachable(obj: GraspedObject, finger_directions: np.ndarray, length: float, planar: bool) -> np.ndarray:
+    """Which fingers can touch the object at all, (F,) bool: those whose base (the palm centre) lies within L + R
+    of the object's segment, as the rod sees it. Contact is never searched for the others."""
+    start, end, radius = object_in_rod_frames(obj, finger_directions, planar)
+    palm = closest_points(np.zeros((len(start), 1, start.shape[1])), start, end)[:, 0]
+    return (np.linalg.norm(palm, axis=1) < length + radius) & (radius > 0)
 
 
 @njit(cache=True)
-def find_penetrations(positions, centers, radii, held, searched, first_free_node, tolerance, new_hold, hold_at):
-    """Marks in ``new_hold`` (R, N) every free node of a searched rod that lies inside its object by more than
-    ``tolerance`` [m], and writes its radial projection onto the surface into ``hold_at`` (R, N, D). Returns the
-    number found per rod."""
+def find_penetrations(positions, starts, ends, radii, held, searched, first_free_node, tolerance, new_hold, hold_at):
+    """Marks in ``new_hold`` (R, N) every free node of a searched rod that lies inside its object (the points within
+    ``radii`` of the segment ``starts``–``ends``, (R, D) each) by more than ``tolerance`` [m], and writes its
+    projection onto the surface, away from the nearest point of the segment, into ``hold_at`` (R, N, D). Returns
+    the number found per rod."""
     n_rods, n_nodes, dim = positions.shape
     found = np.zeros(n_rods, dtype=np.int64)
+    nearest = np.empty(dim)
     for r in range(n_rods):
         if not searched[r]:
             continue
         radius = radii[r]
+        length2 = 0.0
+        for k in range(dim):
+            length2 += (ends[r, k] - starts[r, k]) ** 2
         for i in range(first_free_node, n_nodes):
             if held[r, i]:
                 continue
+            along = 0.0
+            if length2 > 0.0:
+                for k in range(dim):
+                    along += (positions[r, i, k] - starts[r, k]) * (ends[r, k] - starts[r, k])
+                along = min(max(along / length2, 0.0), 1.0)
             distance2 = 0.0
             for k in range(dim):
-                d = positions[r, i, k] - centers[r, k]
+                nearest[k] = starts[r, k] + along * (ends[r, k] - starts[r, k])
+                d = positions[r, i, k] - nearest[k]
                 distance2 += d * d
             distance = math.sqrt(distance2)
             if distance < radius - tolerance and distance > 0.0:
                 new_hold[r, i] = True
                 found[r] += 1
                 for k in range(dim):
-                    hold_at[r, i, k] = centers[r, k] + (positions[r, i, k] - centers[r, k]) * radius / distance
+                    hold_at[r, i, k] = nearest[k] + (positions[r, i, k] - nearest[k]) * radius / distance
     return found

@@ -21,7 +21,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .config import Scene
-from .contact import PENETRATION_TOLERANCE, ContactReport, find_penetrations, reachable, sphere_in_rod_frames
+from .contact import (
+    PENETRATION_TOLERANCE,
+    ContactReport,
+    closest_points,
+    find_penetrations,
+    object_in_rod_frames,
+    reachable,
+)
 from .discretization import Discretization
 from .forces import StepContext
 from .integrators import INTEGRATORS
@@ -101,11 +108,11 @@ class Simulator:
         self._object = None
         if scene.grasped_object is not None:
             planar = scene.model == "planar"
-            centers, radii = sphere_in_rod_frames(scene.grasped_object, self.disc.finger_directions, planar)
+            starts, ends, radii = object_in_rod_frames(scene.grasped_object, self.disc.finger_directions, planar)
             searched = reachable(scene.grasped_object, self.disc.finger_directions, scene.gripper.finger.length,
                                  planar)
-            self._object = (np.tile(centers, (self.batch_size, 1)), np.tile(radii, self.batch_size),
-                            np.tile(searched, self.batch_size))
+            self._object = (np.tile(starts, (self.batch_size, 1)), np.tile(ends, (self.batch_size, 1)),
+                            np.tile(radii, self.batch_size), np.tile(searched, self.batch_size))
 
     @property
     def n_fingers(self) -> int:
@@ -336,7 +343,7 @@ class Simulator:
         residual = np.zeros((R, disc.n_dofs))
         corrector = np.zeros(R, dtype=np.int64)
         rods = self._all_rods
-        centers, radii, searched = self._object
+        starts, ends, radii, searched = self._object
         for k in range(self.scene.contact.max_corrector_iterations + 1):
             q[rods] = q_start[rods]
             q[..., :D][held & rods[:, None]] = hold_at[held & rods[:, None]]
@@ -344,11 +351,11 @@ class Simulator:
             for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
                 total[rods] = part[rods]
             reaction = residual.reshape(R, N, S)[..., :D] * held[..., None]
-            outward = q[..., :D] - centers[:, None, :]
+            outward = q[..., :D] - closest_points(q[..., :D], starts, ends)
             normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
             adhesive = held & (normal_reaction < 0.0)
             new_hold = np.zeros((R, N), dtype=bool)
-            found = find_penetrations(q[..., :D], centers, radii, held, searched, self._first_free_node,
+            found = find_penetrations(q[..., :D], starts, ends, radii, held, searched, self._first_free_node,
                                       PENETRATION_TOLERANCE, new_hold, hold_at)
             changed = adhesive.any(axis=1) | (found > 0)
             if not changed.any() or k == self.scene.contact.max_corrector_iterations:
@@ -392,10 +399,9 @@ class Simulator:
                                 reference_twist=reference_twist.reshape(shape))
         contact = None
         if held is not None:
-            centers = self._object[0]
             reaction = np.zeros((R, N, S))
             reaction[..., :D] = residual.reshape(R, N, S)[..., :D] * held[..., None]
-            outward = q[..., :D] - centers[:, None, :]
+            outward = q[..., :D] - closest_points(q[..., :D], self._object[0], self._object[1])
             outward /= np.linalg.norm(outward, axis=-1, keepdims=True)
             contact = ContactReport(
                 held=held.reshape(B, F, N),

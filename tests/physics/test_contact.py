@@ -1,4 +1,4 @@
-"""Contact with the paper's fixed ball: compression only, no penetration, bounded corrector, symmetric reactions."""
+"""Contact with fixed objects (the paper's ball, a capsule): compression only, no penetration, bounded corrector."""
 
 import math
 
@@ -10,6 +10,7 @@ from soft_gripper_env.physics import (
     PAPER_BALL,
     PENETRATION_TOLERANCE,
     SOFT_TRANSLUCENT_SILICONE,
+    Capsule,
     ContactSettings,
     Simulator,
     Sphere,
@@ -17,7 +18,7 @@ from soft_gripper_env.physics import (
     run_ramp,
 )
 from soft_gripper_env.physics.config import replace
-from soft_gripper_env.physics.contact import reachable
+from soft_gripper_env.physics.contact import closest_points, reachable
 
 
 @pytest.fixture(scope="module")
@@ -137,7 +138,11 @@ def test_batch_members_with_contact_are_independent():
     (lambda: Sphere(-0.1, (0, 0, 0)), r"Sphere\.radius = -0\.1 m"),
     (lambda: Sphere(0.1, (0, 0)), r"Sphere\.center = \(0, 0\) must have 3 components"),
     (lambda: ContactSettings(max_corrector_iterations=-1), r"ContactSettings\.max_corrector_iterations = -1"),
-    (lambda: replace(paper_scene(), grasped_object="ball"), r"Scene\.grasped_object must be a Sphere or None"),
+    (lambda: replace(paper_scene(), grasped_object="ball"), r"Scene\.grasped_object must be a Sphere, a Capsule"),
+    (lambda: Capsule(0.02, (0, 0), (0, 0, 1)), r"Capsule\.start = \(0, 0\) must have 3 components"),
+    (lambda: Capsule(0.0, (0, 0, 0), (0, 0, 1)), r"Capsule\.radius = 0\.0 m"),
+    (lambda: paper_scene("planar", grasped_object=Capsule(0.04, (0, -0.05, -0.1), (0, 0.05, -0.1))),
+     r"contact with a Capsule needs Scene\.model = '3d'"),
 ])
 def test_bad_contact_configuration_raises(make, pattern):
     with pytest.raises(ValueError, match=pattern):
@@ -169,3 +174,35 @@ def test_scripted_ramp_saturates_at_the_curvature_limit():
     scene = replace(paper_scene(), duration=15.0, time_step=0.05)  # κ̄ would reach −2.25
     run = run_ramp(scene)
     assert run.converged.all() and np.isfinite(run.positions).all()
+
+
+def test_a_capsule_of_zero_length_is_the_sphere():
+    ball = paper_scene("3d", grasped_object=PAPER_BALL)
+    pill = replace(ball, grasped_object=Capsule(PAPER_BALL.radius, PAPER_BALL.center, PAPER_BALL.center))
+    a, b = run_ramp(ball), run_ramp(pill)
+    np.testing.assert_array_equal(a.positions, b.positions)
+    for x, y in zip(a.contacts, b.contacts, strict=True):
+        np.testing.assert_array_equal(x.reaction, y.reaction)
+
+
+def test_fingers_close_on_a_horizontal_capsule():
+    """A capsule lying along y below the palm: finger 1 (along +x) meets its side, fingers 2 and 3 (at ±120°) meet
+    it obliquely; no node penetrates, every hold is compressive and sits on the surface."""
+    capsule = Capsule(0.05, (0.0, -0.06, -0.11), (0.0, 0.06, -0.11))
+    run = run_ramp(paper_scene("3d", grasped_object=capsule))
+    assert run.converged.all()
+    held_any = np.zeros(3, dtype=bool)
+    for x, report in zip(run.positions[1:, 0], run.contacts, strict=True):
+        assert report.resolved.all()
+        nearest = closest_points(x, np.tile(capsule.start, (3, 1)), np.tile(capsule.end, (3, 1)))
+        distance = np.linalg.norm(x - nearest, axis=-1)
+        assert distance.min() >= capsule.radius - PENETRATION_TOLERANCE
+        held = report.held[0]
+        np.testing.assert_allclose(distance[held], capsule.radius, atol=1e-12)
+        assert np.all(report.normal_reaction[0][held] >= 0)
+        held_any |= held.any(axis=1)
+    assert held_any.all()
+    # the capsule is symmetric under y → −y, which swaps fingers 2 and 3
+    last = run.contacts[-1]
+    mirror = np.array([1.0, -1.0, 1.0])
+    np.testing.assert_allclose(last.reaction[0, 1], last.reaction[0, 2] * mirror, atol=1e-8)
