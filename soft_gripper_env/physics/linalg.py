@@ -23,13 +23,12 @@ def scatter_contiguous(band, offset, hessian, m):
 
 
 @njit(cache=True)
-def solve_banded_symmetric_rod(a, x, free):
-    """Solve A·x = b for one rod in place: ``x`` holds b on entry and the solution on return; ``a`` (n, kd+1) is
-    overwritten by the factors. Returns False if a pivot was zero or not finite (``x`` is then NaN).
+def factor_banded_symmetric(a, free):
+    """Factor one rod's band (n, kd+1) in place as L·D·Lᵀ; returns False at a zero or non-finite pivot.
 
-    Rows and columns of DOFs where ``free`` is False are replaced by the identity with a zero right-hand side, so
-    fixed DOFs get no update. A symmetric LDLᵀ factorisation without pivoting: the Newton matrix of an implicit step
-    is dominated by its positive mass term, and LDLᵀ costs about a third less than a general band LU.
+    Rows and columns of DOFs where ``free`` is False are replaced by the identity first, so that a solve gives them
+    no update. A symmetric LDLᵀ factorisation without pivoting: the Newton matrix of an implicit step is dominated by
+    its positive mass term, and LDLᵀ costs about a third less than a general band LU.
     """
     n, kd1 = a.shape
     kd = kd1 - 1
@@ -37,7 +36,6 @@ def solve_banded_symmetric_rod(a, x, free):
         if not free[i]:
             a[i, :] = 0.0
             a[i, kd] = 1.0
-            x[i] = 0.0
             for k in range(1, min(kd, n - 1 - i) + 1):  # column i below the diagonal
                 a[i + k, kd - k] = 0.0
     t = np.empty(kd1)
@@ -56,9 +54,19 @@ def solve_banded_symmetric_rod(a, x, free):
             d -= t[k - j0] * lik
             row[kd - i + k] = lik
         if d == 0.0 or not np.isfinite(d):
-            x[:] = np.nan
             return False
         row[kd] = d
+    return True
+
+
+@njit(cache=True)
+def solve_factored(a, x, free):
+    """Solve with a band factored by :func:`factor_banded_symmetric`, in place on ``x`` (n,); fixed DOFs get 0."""
+    n, kd1 = a.shape
+    kd = kd1 - 1
+    for i in range(n):
+        if not free[i]:
+            x[i] = 0.0
     for i in range(n):  # L y = b
         s = x[i]
         row = a[i]
@@ -72,6 +80,16 @@ def solve_banded_symmetric_rod(a, x, free):
         row = a[i]
         for k in range(max(0, i - kd), i):
             x[k] -= row[kd - i + k] * xi
+
+
+@njit(cache=True)
+def solve_banded_symmetric_rod(a, x, free):
+    """Solve A·x = b for one rod in place: ``x`` holds b on entry and the solution on return; ``a`` (n, kd+1) is
+    overwritten by its factors. Returns False if a pivot was zero or not finite (``x`` is then NaN)."""
+    if not factor_banded_symmetric(a, free):
+        x[:] = np.nan
+        return False
+    solve_factored(a, x, free)
     return True
 
 
