@@ -33,6 +33,7 @@ from .discretization import Discretization
 from .forces import StepContext
 from .integrators import INTEGRATORS
 from .linalg import newton_iteration
+from .rigid_body import BodyModel, eliminate_rods, rotation_exp
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
 
@@ -64,6 +65,16 @@ class RodState:
     reference_twist: np.ndarray | None = None
     held: np.ndarray | None = None
     """Nodes held on the grasped object's surface, (B, F, N) bool; None in a scene without an object."""
+    hold_offset: np.ndarray | None = None
+    """For a free object: each held node's offset from the object's centre in the object's frame [m], (B, F, N, 3)."""
+    body_position: np.ndarray | None = None
+    """Centre of a free object [m], (B, 3); None unless the scene's object is free."""
+    body_velocity: np.ndarray | None = None
+    """Its velocity [m/s], (B, 3)."""
+    body_orientation: np.ndarray | None = None
+    """Its orientation, body to world, (B, 3, 3)."""
+    body_angular_velocity: np.ndarray | None = None
+    """Its angular velocity [rad/s], (B, 3)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,9 +115,23 @@ class Simulator:
         self._tolerance_by_step: dict[float, np.ndarray] = {}
         self._clamp_free = np.tile(self.disc.free, (self.n_rods, 1))
         self._all_rods = np.ones(self.n_rods, dtype=bool)
+        self._no_shift = np.zeros((self.n_rods, self.disc.dim))
         self._first_free_node = 0 if scene.gripper.finger.clamp == "free" else 2
         self._object = None
-        if scene.grasped_object is not None:
+        self._body = None
+        obj = scene.grasped_object
+        if obj is not None and getattr(obj, "free", False):
+            self._body = BodyModel.from_scene(obj, scene.forces)
+            directions = self.disc.finger_directions
+            if scene.model == "3d":
+                projection = np.broadcast_to(np.eye(3), (len(directions), 3, 3))
+            else:
+                projection = np.stack([directions, np.tile([0.0, 0.0, 1.0], (len(directions), 1))], axis=1)
+            self._projection = np.tile(projection, (self.batch_size, 1, 1))  # rod coordinates from world, (R, D, 3)
+            force_tolerance = self.disc.residual_scale[-1]  # a force DOF's: relative_tolerance·EI/L² [N]
+            length = scene.gripper.finger.length
+            self._body_tolerance = np.repeat([force_tolerance, force_tolerance * length], 3)  # [N], [N·m]
+        elif obj is not None:
             planar = scene.model == "planar"
             starts, ends, radii = object_in_rod_frames(scene.grasped_object, self.disc.finger_directions, planar)
             searched = reachable(scene.grasped_object, self.disc.finger_directions, scene.gripper.finger.length,
@@ -135,6 +160,11 @@ class Simulator:
             director[..., 2] = 1.0  # m1 = +z, so κ1 < 0 bends toward −z
             state = replace(state, tangent=tangent, director=director,
                             reference_twist=np.zeros(q.shape[:3]))
+        if self._body is not None:
+            B, obj = self.batch_size, self.scene.grasped_object
+            state = replace(state, held=np.zeros(q.shape[:3], dtype=bool), hold_offset=np.zeros(q.shape[:3] + (3,)),
+                            body_position=np.tile(obj.center, (B, 1)), body_velocity=np.tile(obj.velocity, (B, 1)),
+                            body_orientation=np.tile(np.eye(3), (B, 1, 1)), body_angular_velocity=np.zeros((B, 3)))
         return state
 
     def world_positions(self, state: RodState) -> np.ndarray:
@@ -355,8 +385,8 @@ class Simulator:
             normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
             adhesive = held & (normal_reaction < 0.0)
             new_hold = np.zeros((R, N), dtype=bool)
-            found = find_penetrations(q[..., :D], starts, ends, radii, held, searched, self._first_free_node,
-                                      PENETRATION_TOLERANCE, new_hold, hold_at)
+            found = find_penetrations(q[..., :D], q_old[..., :D], self._no_shift, starts, ends, radii, held, searched,
+                                      self._first_free_node, PENETRATION_TOLERANCE, new_hold, hold_at)
             changed = adhesive.any(axis=1) | (found > 0)
             if not changed.any() or k == self.scene.contact.max_corrector_iterations:
                 break
@@ -364,6 +394,157 @@ class Simulator:
             corrector[changed] += 1
             rods = changed
         return q, held, changed, corrector, converged, iterations, ratio, residual
+
+    def _body_in_rod_frames(self, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A free sphere at ``centers`` (B, 3) as each rod sees it: centre (R, D) twice and radius (R,)."""
+        radius = self.scene.grasped_object.radius
+        directions = self.disc.finger_directions
+        if self.disc.dim == 3:
+            rod_centers = np.repeat(centers, self.n_fingers, axis=0)
+            return rod_centers, rod_centers, np.full(self.n_rods, radius)
+        normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(self.n_fingers)], axis=1)
+        distance = (centers @ normals.T).ravel()
+        rod_centers = np.stack([(centers @ directions.T).ravel(), np.repeat(centers[:, 2], self.n_fingers)], axis=1)
+        return rod_centers, rod_centers, np.sqrt(np.maximum(radius**2 - distance**2, 0.0))
+
+    def _solve_with_body(self, state, q_start, q_old, q_pred, frames_old, kbar, dt):
+        """Predictor–corrector contact with a free sphere: each solve moves rods and body together
+        (:meth:`_newton_with_body`); new penetrations are held at their projection onto the body's surface, with
+        their offset in the body's frame, and adhesive holds are released, until nothing changes."""
+        disc = self.disc
+        R, N, D = self.n_rods, disc.n_nodes, disc.dim
+        held = state.held.reshape(R, N).copy()
+        offsets = state.hold_offset.reshape(R, N, 3).copy()
+        body_old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
+        corrector = np.zeros(R, dtype=np.int64)
+        for k in range(self.scene.contact.max_corrector_iterations + 1):
+            q = q_start.copy()
+            converged, iterations, ratio, residual, body = self._newton_with_body(
+                q, q_old, q_pred, frames_old, kbar, state.time, dt, held, offsets, body_old)
+            position, orientation = body[0], body[2]
+            starts, ends, radii = self._body_in_rod_frames(position)
+            reaction = residual.reshape(R, N, disc.stride)[..., :D] * held[..., None]
+            outward = q[..., :D] - starts[:, None, :]
+            normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
+            adhesive = held & (normal_reaction < 0.0)
+            new_hold = np.zeros((R, N), dtype=bool)
+            hold_at = np.zeros((R, N, D))
+            shift = np.einsum("rdj,rj->rd", self._projection, np.repeat(position - body_old[0], self.n_fingers, axis=0))
+            found = find_penetrations(q[..., :D], q_old[..., :D], shift, starts, ends, radii, held, radii > 0,
+                                      self._first_free_node, PENETRATION_TOLERANCE, new_hold, hold_at)
+            changed = adhesive.any(axis=1) | (found > 0)
+            if not changed.any() or k == self.scene.contact.max_corrector_iterations:
+                break
+            # the offset of a new hold, in the body's frame at the end of this solve
+            world = np.einsum("rdj,rnd->rnj", self._projection, hold_at)  # rod coordinates back to world
+            rod_orientation = np.repeat(orientation, self.n_fingers, axis=0)
+            rod_position = np.repeat(position, self.n_fingers, axis=0)
+            new_offsets = np.einsum("rji,rnj->rni", rod_orientation, world - rod_position[:, None, :])
+            offsets[new_hold] = new_offsets[new_hold]
+            held = (held & ~adhesive) | new_hold
+            corrector[changed] += 1
+        return (q, held, changed, corrector, converged, iterations, ratio, residual,
+                (offsets, position, body[1], orientation, body[3]))
+
+    def _body_basis(self, held: np.ndarray) -> np.ndarray:
+        """Basis (B, 6, 6) of the motions a free body may make, padded with zero columns. In 3-D, any. With planar
+        fingers, any translation, and only rotations about the normal of every touching finger's plane (a rotation
+        about another axis would carry held points out of a plane the finger cannot leave)."""
+        B, F = self.batch_size, self.n_fingers
+        basis = np.zeros((B, 6, 6))
+        basis[:, :3, :3] = np.eye(3)
+        touching = held.reshape(B, F, -1).any(axis=2)
+        if self.disc.dim == 3:
+            basis[:, 3:, 3:] = np.eye(3)
+            return basis
+        directions = self.disc.finger_directions
+        normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(F)], axis=1)
+        for b in range(B):
+            planes = normals[touching[b]]
+            if len(planes) == 0:
+                basis[b, 3:, 3:] = np.eye(3)
+            elif np.allclose(np.abs(planes @ planes[0]), 1.0):
+                basis[b, 3:, 3] = planes[0]
+        return basis
+
+    def _newton_with_body(self, q, q_old, q_pred, frames_old, kbar, time, dt, held, offsets, body_old):
+        """Newton's method on the rods and a free sphere together (see :mod:`.rigid_body`); ``q`` (R, N, S) holds
+        the start and receives the solution. Returns per-rod converged, iterations and residual ratio (R,), the
+        residual M·(q − q_pred)/Δt² − f (R, n) (the reactions, on held DOFs) and the body's new
+        (position, velocity, orientation, angular velocity)."""
+        disc = self.disc
+        R, N, S, D, n = self.n_rods, disc.n_nodes, disc.stride, disc.dim, disc.n_dofs
+        B, F = self.batch_size, self.n_fingers
+        c_old, u_old, orientation_old, w_old = body_old
+        c = c_old + dt * u_old
+        theta = dt * w_old
+        mass_term = disc.dof_mass / dt**2
+        tolerance_inverse = self._newton_tolerance_inverse(dt)
+        free = self._free_mask(held)
+        projection = self._projection
+        kd = disc.band_width
+        active = np.ones(B, dtype=bool)
+        converged = np.zeros(B, dtype=bool)
+        iterations = np.zeros(B, dtype=np.int64)
+        ratio = np.full(B, np.inf)
+        max_iterations = self.scene.newton.max_iterations
+        q_flat = q.reshape(R, n)
+        held_positions = q[..., :D]
+        for it in range(max_iterations + 1):
+            orientation = rotation_exp(theta) @ orientation_old
+            offsets_world = np.einsum("rij,rnj->rni", np.repeat(orientation, F, axis=0), offsets)
+            nodes_world = np.repeat(c, F, axis=0)[:, None, :] + offsets_world
+            held_positions[held] = np.einsum("rdj,rnj->rnd", projection, nodes_world)[held]
+            force, band = self._assemble(q, q_old, q_pred, frames_old, kbar, time, dt)
+            residual = mass_term * (q_flat - q_pred.reshape(R, n)) - force.reshape(R, n)
+            # S: a held DOF's motion per unit body motion (δc, δθ): P·(δc − [a]×·δθ)
+            coupling = np.zeros((R, N, S, 6))
+            cross = np.zeros((R, N, 3, 3))
+            cross[..., 0, 1], cross[..., 0, 2], cross[..., 1, 2] = (-offsets_world[..., 2], offsets_world[..., 1],
+                                                                    -offsets_world[..., 0])
+            cross -= np.swapaxes(cross, -1, -2)
+            rod_projection = projection[:, None, :, :]
+            coupling[..., :D, :3] = np.broadcast_to(rod_projection, (R, N, D, 3))
+            coupling[..., :D, 3:] = -rod_projection @ cross
+            coupling *= held[..., None, None]
+            coupling = coupling.reshape(R, n, 6)
+            own, translational, rotational = self._body.residual(c, c_old, u_old, theta, w_old, dt, time)
+            body_residual = own + np.einsum("rnk,rn->rk", coupling, residual).reshape(B, F, 6).sum(axis=1)
+            rod_ratio = np.max(np.abs(residual) * tolerance_inverse * free, axis=1).reshape(B, F).max(axis=1)
+            basis = self._body_basis(held)  # the body's admissible motions (B, 6, k)
+            body_residual = np.einsum("bik,bi->bk", basis, body_residual)
+            body_ratio = np.max(np.abs(body_residual) / self._body_tolerance, axis=1)
+            ratio_now = np.maximum(rod_ratio, body_ratio)
+            ratio = np.where(active, ratio_now, ratio)
+            done = active & (ratio_now <= 1.0)
+            converged |= done
+            active &= ~done
+            if not active.any() or it == max_iterations:
+                break
+            rods = np.repeat(active, F)
+            band[..., kd] += mass_term
+            x0 = np.zeros((R, n))
+            x_coupling = np.zeros((R, n, 6))
+            block = np.zeros((R, 6, 6))
+            rhs = np.zeros((R, 6))
+            eliminate_rods(band, residual, coupling, free, rods, x0, x_coupling, block, rhs)
+            matrix = block.reshape(B, F, 6, 6).sum(axis=1)
+            matrix[:, :3, :3] += translational
+            matrix[:, 3:, 3:] += rotational * np.eye(3)
+            step = np.zeros((B, 6))
+            reduced = np.einsum("bik,bij,bjm->bkm", basis, matrix, basis)
+            reduced += np.eye(6) * ~np.any(basis != 0.0, axis=1)[:, None, :]  # unused columns: identity
+            reduced_rhs = -body_residual + np.einsum("bik,bi->bk", basis, rhs.reshape(B, F, 6).sum(axis=1))
+            step[active] = np.einsum("bik,bk->bi", basis[active],
+                                     np.linalg.solve(reduced[active], reduced_rhs[active][..., None])[..., 0])
+            rod_step = -x0 - np.einsum("rnk,rk->rn", x_coupling, np.repeat(step, F, axis=0))
+            q_flat[rods] += np.where(free[rods], rod_step[rods], 0.0)
+            c[active] += step[active, :3]
+            theta[active] += step[active, 3:]
+            iterations[active] += 1
+        orientation = rotation_exp(theta) @ orientation_old
+        return (np.repeat(converged, F), np.repeat(iterations, F), np.repeat(ratio, F), residual,
+                (c, (c - c_old) / dt, orientation, theta / dt))
 
     def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
         disc = self.disc
@@ -374,7 +555,11 @@ class Simulator:
         if state.acceleration is not None and velocity_old is state.velocity:
             q_start += dt * dt * state.acceleration.reshape(R, N, S)  # start from the extrapolated motion
         frames_old = self._frames(state)
-        if self._object is None:
+        body = None
+        if self._body is not None:
+            q, held, changed, corrector, converged, iterations, ratio, residual, body = self._solve_with_body(
+                state, q_start, q_old, q_pred, frames_old, kbar, dt)
+        elif self._object is None:
             q = q_start
             held = changed = corrector = None
             converged, iterations, ratio, residual = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt,
@@ -388,6 +573,11 @@ class Simulator:
         new_state = RodState(q=q.reshape(state.q.shape), velocity=velocity, time=state.time + dt,
                              acceleration=(velocity - velocity_old) / dt,
                              held=None if held is None else held.reshape(B, F, N))
+        if body is not None:
+            offsets, position, body_velocity, orientation, angular_velocity = body
+            new_state = replace(new_state, hold_offset=offsets.reshape(B, F, N, 3), body_position=position,
+                                body_velocity=body_velocity, body_orientation=orientation,
+                                body_angular_velocity=angular_velocity)
         if disc.model == "3d":
             tangent = np.empty((R, N - 1, 3))
             director = np.empty((R, N - 1, 3))
@@ -401,7 +591,8 @@ class Simulator:
         if held is not None:
             reaction = np.zeros((R, N, S))
             reaction[..., :D] = residual.reshape(R, N, S)[..., :D] * held[..., None]
-            outward = q[..., :D] - closest_points(q[..., :D], self._object[0], self._object[1])
+            starts, ends = self._object[:2] if body is None else self._body_in_rod_frames(body[1])[:2]
+            outward = q[..., :D] - closest_points(q[..., :D], starts, ends)
             outward /= np.linalg.norm(outward, axis=-1, keepdims=True)
             contact = ContactReport(
                 held=held.reshape(B, F, N),
