@@ -65,16 +65,7 @@ class Sphere:
         for c in center:
             check_range("Sphere", "center", c, "m", -1e3, 1e3)
         object.__setattr__(self, "center", center)
-        if self.density is not None:
-            check_range("Sphere", "density", self.density, "kg/m³", 0.0, 1e5)
-        velocity = tuple(float(v) for v in self.velocity)
-        if len(velocity) != 3:
-            raise ValueError(f"Sphere.velocity = {self.velocity!r} must have 3 components [m/s]")
-        for v in velocity:
-            check_range("Sphere", "velocity", v, "m/s", -100.0, 100.0, low_inclusive=True)
-        if any(velocity) and self.density is None:
-            raise ValueError("Sphere.velocity needs Sphere.density: a sphere fixed in space cannot move")
-        object.__setattr__(self, "velocity", velocity)
+        _check_motion(self)
 
     @property
     def segment(self) -> tuple[np.ndarray, np.ndarray]:
@@ -82,17 +73,40 @@ class Sphere:
         return np.asarray(self.center), np.asarray(self.center)
 
 
+def _check_motion(obj) -> None:
+    """Validates the ``density`` and initial ``velocity`` of a sphere or capsule."""
+    kind = type(obj).__name__
+    if obj.density is not None:
+        check_range(kind, "density", obj.density, "kg/m³", 0.0, 1e5)
+    velocity = tuple(float(v) for v in obj.velocity)
+    if len(velocity) != 3:
+        raise ValueError(f"{kind}.velocity = {obj.velocity!r} must have 3 components [m/s]")
+    for v in velocity:
+        check_range(kind, "velocity", v, "m/s", -100.0, 100.0, low_inclusive=True)
+    if any(velocity) and obj.density is None:
+        raise ValueError(f"{kind}.velocity needs {kind}.density: an object fixed in space cannot move")
+    object.__setattr__(obj, "velocity", velocity)
+
+
 @dataclass(frozen=True)
 class Capsule:
-    """A rigid capsule (a cylinder with hemispherical ends), fixed in space: every point within ``radius`` of the
-    segment from ``start`` to ``end``. Contact with it needs the 3-D rod model."""
+    """A rigid capsule (a cylinder with hemispherical ends): every point within ``radius`` of the segment from
+    ``start`` to ``end``. Fixed in space, or free when it has a density. Contact with it needs the 3-D rod model."""
 
     radius: float
     """Radius [m]."""
     start: tuple[float, float, float]
-    """One end of the axis, world frame [m]."""
+    """One end of the axis, world frame [m] (at t = 0, for a free capsule)."""
     end: tuple[float, float, float]
     """The other end of the axis, world frame [m]."""
+    density: float | None = None
+    """Mass density [kg/m³] of a free capsule; None for a capsule fixed in space."""
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Initial velocity of a free capsule [m/s]."""
+
+    @property
+    def free(self) -> bool:
+        return self.density is not None
 
     def __post_init__(self) -> None:
         check_range("Capsule", "radius", self.radius, "m", 0.0)
@@ -103,6 +117,7 @@ class Capsule:
             for c in point:
                 check_range("Capsule", name, c, "m", -1e3, 1e3)
             object.__setattr__(self, name, point)
+        _check_motion(self)
 
     @property
     def segment(self) -> tuple[np.ndarray, np.ndarray]:

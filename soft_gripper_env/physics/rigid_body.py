@@ -1,4 +1,4 @@
-"""A free rigid sphere moved by the fingers' contact reactions, coupled implicitly to them.
+"""A free rigid body (sphere or capsule) moved by the fingers' contact reactions, coupled implicitly to them.
 
 Notation (per gripper):
 
@@ -11,20 +11,22 @@ R, ω      orientation (body → world) and angular velocity                   1
 r_h       a held node's offset from the centre, in the body frame           m
 a_h       the same offset in the world frame, R·r_h                         m
 M_t       mass plus added mass, m + C_a·ρ_w·V                               kg
-I         rotational inertia of a solid sphere, ⅖·m·R²                      kg·m²
+I         rotational inertia (⅖·m·R² for a sphere), world frame R·I_b·Rᵀ  kg·m²
 ========  ================================================================  ==========
 
 Backward Euler for the body, M_t·(c − c_old − Δt·u_old)/Δt² = F_ext(u) − Σ_h R_h and
-I·(θ − Δt·ω_old)/Δt² = −Σ_h a_h × R_h, where R_h is the reaction of the body on held node h (the node's residual)
+(I·ω − I_old·ω_old)/Δt = −Σ_h a_h × R_h, where R_h is the reaction of the body on held node h (the node's residual)
 and held nodes move with the body, x_h = c + a_h. Rods and body are solved together by Newton's method: the rods'
 free DOFs are eliminated rod by rod (one banded factorisation, seven right-hand sides), which leaves a 6×6 system
 for the body per gripper (a Schur complement). A staggered scheme, which would move the body with last iteration's
 reactions, is unstable for a body as light as the water it displaces; this one is not.
 
 External loads come from the scene's own force models: gravity from :class:`~.forces.Gravity`, buoyancy from
-:class:`~.forces.Buoyancy`, quadratic drag ½·ρ_w·C_d·π·R²·|w|·w (C_d = 0.47, a sphere at Re ≈ 10³–10⁵) on the
-velocity relative to the current when :class:`~.hydrodynamics.MorisonDrag` is present, and added mass C_a = 0.5
-when :class:`~.hydrodynamics.AddedMass` is. The torque of the water on a spinning sphere is neglected.
+:class:`~.forces.Buoyancy`, and when :class:`~.hydrodynamics.MorisonDrag` is present quadratic drag on the velocity
+relative to the current: ½·ρ_w·C_d·π·r²·|w|·w for a sphere (C_d = 0.47, Re ≈ 10³–10⁵) or a capsule's two end caps,
+plus ½·ρ_w·C_n·D·h·|w_n|·w_n across a capsule's cylinder. With :class:`~.hydrodynamics.AddedMass`, added mass
+C_a = 0.5 of a sphere's volume, and C_a·ρ_w·π·r²·h across a capsule's cylinder. The water's torque on a turning
+body is neglected.
 """
 
 from __future__ import annotations
@@ -47,50 +49,81 @@ SPHERE_ADDED_MASS_COEFFICIENT = 0.5
 
 @dataclass(frozen=True, eq=False)
 class BodyModel:
-    """Mass properties and external loads of a free sphere in a scene."""
+    """Mass properties and external loads of a free sphere or capsule in a scene (body frame = world at t = 0)."""
 
     mass: float
     """m [kg]."""
-    translational_inertia: float
-    """M_t = m + added mass [kg]."""
-    rotational_inertia: float
-    """⅖·m·R² [kg·m²]."""
+    inertia: np.ndarray
+    """Rotational inertia about the centre, body frame [kg·m²], (3, 3)."""
+    added_mass: np.ndarray
+    """Added-mass tensor, body frame [kg], (3, 3)."""
     weight: float
     """Net weight along −z, (m − ρ_w·V)·g [N]."""
-    drag: float
-    """½·ρ_w·C_d·π·R² [kg/m]; 0 without Morison drag."""
+    normal_drag: float
+    """½·ρ_w·C_n·D·h of a capsule's cylinder, on the velocity normal to its axis [kg/m]; 0 for a sphere."""
+    isotropic_drag: float
+    """½·ρ_w·C_d·π·r² of the sphere (or a capsule's two end caps together) [kg/m]."""
+    axis: np.ndarray
+    """The capsule's axis in the body frame (3,); any unit vector for a sphere."""
+    segment: tuple[np.ndarray, np.ndarray]
+    """The object's segment ends relative to its centre, body frame [m] (both zero for a sphere)."""
     current: Current | None
 
     @classmethod
-    def from_scene(cls, sphere, forces) -> BodyModel:
-        volume = 4.0 / 3.0 * math.pi * sphere.radius**3
-        mass = sphere.density * volume
+    def from_scene(cls, obj, forces) -> BodyModel:
+        r = obj.radius
+        start, end = (np.asarray(p, dtype=float) for p in obj.segment)
+        center = 0.5 * (start + end)
+        length = float(np.linalg.norm(end - start))
+        axis = (end - start) / length if length > 0 else np.array([0.0, 0.0, 1.0])
+        along = np.outer(axis, axis)
+        across = np.eye(3) - along
+        cylinder, caps = math.pi * r**2 * length, 4.0 / 3.0 * math.pi * r**3
+        m_cylinder, m_caps = obj.density * cylinder, obj.density * caps
+        inertia = (m_cylinder * r**2 / 2 + m_caps * 2 * r**2 / 5) * along + (
+            m_cylinder * (length**2 / 12 + r**2 / 4) + m_caps * (2 * r**2 / 5 + length**2 / 4 + 3 * length * r / 8)
+        ) * across
         gravity = sum(f.acceleration for f in forces if isinstance(f, Gravity))
-        buoyancy = sum(f.fluid_density * f.acceleration * volume for f in forces if isinstance(f, Buoyancy))
-        added = sum(SPHERE_ADDED_MASS_COEFFICIENT * f.fluid_density * volume for f in forces
-                    if isinstance(f, AddedMass))
+        buoyancy = sum(f.fluid_density * f.acceleration * (cylinder + caps) for f in forces if isinstance(f, Buoyancy))
+        added = sum((f.coefficient * f.fluid_density * cylinder * across
+                     + SPHERE_ADDED_MASS_COEFFICIENT * f.fluid_density * caps * np.eye(3)) for f in forces
+                    if isinstance(f, AddedMass)) + np.zeros((3, 3))
         morison = [f for f in forces if isinstance(f, MorisonDrag)]
-        drag = sum(0.5 * f.fluid_density * SPHERE_DRAG_COEFFICIENT * math.pi * sphere.radius**2 for f in morison)
-        return cls(mass=mass, translational_inertia=mass + added, rotational_inertia=0.4 * mass * sphere.radius**2,
-                   weight=mass * gravity - buoyancy, drag=drag, current=morison[0].current if morison else None)
+        normal_drag = sum(0.5 * f.fluid_density * f.normal_coefficient * 2 * r * length for f in morison)
+        isotropic = sum(0.5 * f.fluid_density * SPHERE_DRAG_COEFFICIENT * math.pi * r**2 for f in morison)
+        return cls(mass=m_cylinder + m_caps, inertia=inertia, added_mass=added,
+                   weight=(m_cylinder + m_caps) * gravity - buoyancy, normal_drag=normal_drag,
+                   isotropic_drag=isotropic, axis=axis, segment=(start - center, end - center),
+                   current=morison[0].current if morison else None)
 
-    def residual(self, c, c_old, u_old, theta, w_old, dt, time):
-        """The body's own residual (B, 6) (inertia minus external loads) and the diagonal blocks of its Jacobian,
-        (B, 3, 3) for translation and a scalar for rotation."""
+    def residual(self, c, c_old, u_old, theta, w_old, orientation, orientation_old, dt, time):
+        """The body's own residual (B, 6) (inertia minus external loads), and the diagonal blocks of its Jacobian
+        for translation and rotation, (B, 3, 3) each. ``orientation`` is the end-of-step R, (B, 3, 3)."""
         u = (c - c_old) / dt
+        # translational inertia with the start-of-step orientation, as for the rods' added mass
+        mass = self.mass * np.eye(3) + orientation_old @ self.added_mass @ orientation_old.transpose(0, 2, 1)
         force = np.zeros_like(c)
         force[:, 2] -= self.weight
-        jacobian = np.broadcast_to(np.eye(3) * self.translational_inertia / dt**2, c.shape[:1] + (3, 3)).copy()
-        if self.drag:
-            w = u - (self.current.at(time) if self.current is not None else 0.0)
-            speed = np.linalg.norm(w, axis=1, keepdims=True)
-            force -= self.drag * speed * w
+        jacobian = mass / dt**2
+        w = u - (self.current.at(time) if self.current is not None else 0.0)
+        for coefficient, normal_only in ((self.isotropic_drag, False), (self.normal_drag, True)):
+            if not coefficient:
+                continue
+            axis = orientation @ self.axis
+            part = w - np.sum(w * axis, axis=1, keepdims=True) * axis if normal_only else w
+            speed = np.linalg.norm(part, axis=1, keepdims=True)
+            force -= coefficient * speed * part
+            projector = np.eye(3) - axis[:, :, None] * axis[:, None, :] if normal_only else np.eye(3)
             safe = np.where(speed > 0, speed, 1.0)
-            outer = w[:, :, None] * w[:, None, :] / safe[..., None]
-            jacobian += self.drag / dt * (speed[..., None] * np.eye(3) + outer)
-        residual = np.concatenate([self.translational_inertia * (c - c_old - dt * u_old) / dt**2 - force,
-                                   self.rotational_inertia * (theta - dt * w_old) / dt**2], axis=1)
-        return residual, jacobian, self.rotational_inertia / dt**2
+            jacobian = jacobian + coefficient / dt * (speed[..., None] * projector
+                                                       + part[:, :, None] * part[:, None, :] / safe[..., None])
+        inertia_new = orientation @ self.inertia @ orientation.transpose(0, 2, 1)
+        inertia_old = orientation_old @ self.inertia @ orientation_old.transpose(0, 2, 1)
+        momentum_change = (np.einsum("bij,bj->bi", inertia_new, theta / dt)
+                           - np.einsum("bij,bj->bi", inertia_old, w_old)) / dt
+        residual = np.concatenate([np.einsum("bij,bj->bi", mass, c - c_old - dt * u_old) / dt**2 - force,
+                                   momentum_change], axis=1)
+        return residual, jacobian, inertia_new / dt**2
 
 
 def rotation_exp(theta: np.ndarray) -> np.ndarray:

@@ -162,8 +162,9 @@ class Simulator:
                             reference_twist=np.zeros(q.shape[:3]))
         if self._body is not None:
             B, obj = self.batch_size, self.scene.grasped_object
+            center = 0.5 * (obj.segment[0] + obj.segment[1])
             state = replace(state, held=np.zeros(q.shape[:3], dtype=bool), hold_offset=np.zeros(q.shape[:3] + (3,)),
-                            body_position=np.tile(obj.center, (B, 1)), body_velocity=np.tile(obj.velocity, (B, 1)),
+                            body_position=np.tile(center, (B, 1)), body_velocity=np.tile(obj.velocity, (B, 1)),
                             body_orientation=np.tile(np.eye(3), (B, 1, 1)), body_angular_velocity=np.zeros((B, 3)))
         return state
 
@@ -395,13 +396,15 @@ class Simulator:
             rods = changed
         return q, held, changed, corrector, converged, iterations, ratio, residual
 
-    def _body_in_rod_frames(self, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """A free sphere at ``centers`` (B, 3) as each rod sees it: centre (R, D) twice and radius (R,)."""
+    def _body_in_rod_frames(self, centers: np.ndarray,
+                            orientations: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A free body at ``centers`` (B, 3) turned by ``orientations`` (B, 3, 3) as each rod sees it: its segment's
+        ends (R, D) and (R, D), and its radius (R,)."""
         radius = self.scene.grasped_object.radius
         directions = self.disc.finger_directions
         if self.disc.dim == 3:
-            rod_centers = np.repeat(centers, self.n_fingers, axis=0)
-            return rod_centers, rod_centers, np.full(self.n_rods, radius)
+            ends = [np.repeat(centers + orientations @ point, self.n_fingers, axis=0) for point in self._body.segment]
+            return ends[0], ends[1], np.full(self.n_rods, radius)
         normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(self.n_fingers)], axis=1)
         distance = (centers @ normals.T).ravel()
         rod_centers = np.stack([(centers @ directions.T).ravel(), np.repeat(centers[:, 2], self.n_fingers)], axis=1)
@@ -422,15 +425,18 @@ class Simulator:
             converged, iterations, ratio, residual, body = self._newton_with_body(
                 q, q_old, q_pred, frames_old, kbar, state.time, dt, held, offsets, body_old)
             position, orientation = body[0], body[2]
-            starts, ends, radii = self._body_in_rod_frames(position)
+            starts, ends, radii = self._body_in_rod_frames(position, orientation)
             reaction = residual.reshape(R, N, disc.stride)[..., :D] * held[..., None]
-            outward = q[..., :D] - starts[:, None, :]
+            outward = q[..., :D] - closest_points(q[..., :D], starts, ends)
             normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
             adhesive = held & (normal_reaction < 0.0)
             new_hold = np.zeros((R, N), dtype=bool)
             hold_at = np.zeros((R, N, D))
             shift = np.einsum("rdj,rj->rd", self._projection, np.repeat(position - body_old[0], self.n_fingers, axis=0))
-            found = find_penetrations(q[..., :D], q_old[..., :D], shift, starts, ends, radii, held, radii > 0,
+            # search only fingers the body can reach: its segment within L + R of the palm (the rods' origin)
+            palm = closest_points(np.zeros((R, 1, D)), starts, ends)[:, 0]
+            searched = (radii > 0) & (np.linalg.norm(palm, axis=1) < self.scene.gripper.finger.length + radii)
+            found = find_penetrations(q[..., :D], q_old[..., :D], shift, starts, ends, radii, held, searched,
                                       self._first_free_node, PENETRATION_TOLERANCE, new_hold, hold_at)
             changed = adhesive.any(axis=1) | (found > 0)
             if not changed.any() or k == self.scene.contact.max_corrector_iterations:
@@ -508,7 +514,8 @@ class Simulator:
             coupling[..., :D, 3:] = -rod_projection @ cross
             coupling *= held[..., None, None]
             coupling = coupling.reshape(R, n, 6)
-            own, translational, rotational = self._body.residual(c, c_old, u_old, theta, w_old, dt, time)
+            own, translational, rotational = self._body.residual(c, c_old, u_old, theta, w_old, orientation,
+                                                                 orientation_old, dt, time)
             body_residual = own + np.einsum("rnk,rn->rk", coupling, residual).reshape(B, F, 6).sum(axis=1)
             rod_ratio = np.max(np.abs(residual) * tolerance_inverse * free, axis=1).reshape(B, F).max(axis=1)
             basis = self._body_basis(held)  # the body's admissible motions (B, 6, k)
@@ -530,7 +537,7 @@ class Simulator:
             eliminate_rods(band, residual, coupling, free, rods, x0, x_coupling, block, rhs)
             matrix = block.reshape(B, F, 6, 6).sum(axis=1)
             matrix[:, :3, :3] += translational
-            matrix[:, 3:, 3:] += rotational * np.eye(3)
+            matrix[:, 3:, 3:] += rotational
             step = np.zeros((B, 6))
             reduced = np.einsum("bik,bij,bjm->bkm", basis, matrix, basis)
             reduced += np.eye(6) * ~np.any(basis != 0.0, axis=1)[:, None, :]  # unused columns: identity
@@ -591,7 +598,7 @@ class Simulator:
         if held is not None:
             reaction = np.zeros((R, N, S))
             reaction[..., :D] = residual.reshape(R, N, S)[..., :D] * held[..., None]
-            starts, ends = self._object[:2] if body is None else self._body_in_rod_frames(body[1])[:2]
+            starts, ends = self._object[:2] if body is None else self._body_in_rod_frames(body[1], body[3])[:2]
             outward = q[..., :D] - closest_points(q[..., :D], starts, ends)
             outward /= np.linalg.norm(outward, axis=-1, keepdims=True)
             contact = ContactReport(

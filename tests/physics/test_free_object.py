@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from soft_gripper_env.physics import PENETRATION_TOLERANCE, WATER_DENSITY, Simulator, Sphere, paper_scene
+from soft_gripper_env.physics import PENETRATION_TOLERANCE, WATER_DENSITY, Capsule, Simulator, Sphere, paper_scene
 from soft_gripper_env.physics.config import replace
 from soft_gripper_env.physics.rigid_body import SPHERE_DRAG_COEFFICIENT
 
@@ -111,9 +111,49 @@ def test_free_sphere_batch_members_are_independent():
 
 @pytest.mark.parametrize("make, pattern", [
     (lambda: Sphere(0.05, (0, 0, 0), velocity=(0, 0, 1)), r"Sphere\.velocity needs Sphere\.density"),
+    (lambda: Capsule(0.02, (0, 0, 0), (0, 0, 0.1), velocity=(1, 0, 0)), r"Capsule\.velocity needs Capsule\.density"),
+    (lambda: Capsule(0.02, (0, 0, 0), (0, 0, 0.1), density=0.0), r"Capsule\.density = 0\.0 kg/m³"),
     (lambda: Sphere(0.05, (0, 0, 0), density=-1.0), r"Sphere\.density = -1\.0 kg/m³"),
     (lambda: Sphere(0.05, (0, 0, 0), density=1000.0, velocity=(0, 1)), r"Sphere\.velocity = \(0, 1\) must have 3"),
 ])
 def test_bad_free_sphere_raises(make, pattern):
     with pytest.raises(ValueError, match=pattern):
         make()
+
+
+def test_free_capsule_sinks_broadside_without_turning():
+    """Horizontal in still water: (m − ρ_w·V)·g = (½·ρ_w·C_n·D·h + ½·ρ_w·C_d·π·r²)·v² (cylinder plus end caps)."""
+    radius, length, density = 0.02, 0.1, 1300.0
+    capsule = Capsule(radius, (-length / 2, 0.0, -0.6), (length / 2, 0.0, -0.6), density=density)
+    sim = Simulator(paper_scene("3d", medium="water", grasped_object=capsule))
+    state = sim.initial_state()
+    for _ in range(200):
+        result = sim.step(state, 0.0)
+        assert result.converged.all()
+        state = result.state
+    volume = math.pi * radius**2 * length + 4 / 3 * math.pi * radius**3
+    drag = 0.5 * WATER_DENSITY * (1.2 * 2 * radius * length + SPHERE_DRAG_COEFFICIENT * math.pi * radius**2)
+    terminal = math.sqrt((density - WATER_DENSITY) * volume * 9.81 / drag)
+    assert -state.body_velocity[0, 2] == pytest.approx(terminal, rel=0.02)
+    np.testing.assert_allclose(state.body_orientation[0], np.eye(3), atol=1e-9)
+
+
+def test_fingers_close_on_a_free_capsule():
+    """A capsule across the gripper, slightly heavier than water: every step converges with compressive holds on
+    its surface and no penetration, and the fingers hold it."""
+    from soft_gripper_env.physics.contact import closest_points
+
+    capsule = Capsule(0.04, (0.0, -0.05, -0.1), (0.0, 0.05, -0.1), density=1100.0)
+    sim = Simulator(paper_scene("3d", medium="water", grasped_object=capsule))
+    state = sim.initial_state()
+    for _ in range(150):
+        result = sim.step(state, max(-0.6 * state.time, -0.25))
+        assert result.converged.all() and result.contact.resolved.all()
+        state = result.state
+        ends = [np.repeat(state.body_position + state.body_orientation @ p, 3, axis=0) for p in sim._body.segment]
+        x = sim.world_positions(state)[0]
+        distance = np.linalg.norm(x - closest_points(x, ends[0], ends[1]), axis=-1)
+        assert distance.min() >= capsule.radius - PENETRATION_TOLERANCE
+        np.testing.assert_allclose(distance[state.held[0]], capsule.radius, atol=1e-9)
+        assert np.all(result.contact.normal_reaction[state.held] >= 0)
+    assert state.held[0].any(axis=1).all()  # every finger holds it
