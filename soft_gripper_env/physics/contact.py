@@ -28,7 +28,7 @@ surface: an object pushed up against it passes the clamped nodes.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass
 
 import numpy as np
 from numba import njit
@@ -40,7 +40,22 @@ PENETRATION_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True)
-class Sphere:
+class _Body:
+    """What a grasped object has whether it is a sphere or a capsule: fixed, or free with a density."""
+
+    _: KW_ONLY
+    density: float | None = None
+    """Mass density [kg/m³] of a free object; None for an object fixed in space."""
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Initial velocity of a free object [m/s]."""
+
+    @property
+    def free(self) -> bool:
+        return self.density is not None
+
+
+@dataclass(frozen=True)
+class Sphere(_Body):
     """A rigid sphere: fixed in space (the paper's ball is :data:`PAPER_BALL`), or free when it has a density, moved
     by gravity, buoyancy, drag, added mass and the contact reactions (:mod:`.rigid_body`)."""
 
@@ -48,14 +63,6 @@ class Sphere:
     """Radius [m]."""
     center: tuple[float, float, float]
     """Centre in the world frame [m] (at t = 0, for a free sphere)."""
-    density: float | None = None
-    """Mass density [kg/m³] of a free sphere; None for a sphere fixed in space."""
-    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    """Initial velocity of a free sphere [m/s]."""
-
-    @property
-    def free(self) -> bool:
-        return self.density is not None
 
     def __post_init__(self) -> None:
         check_range("Sphere", "radius", self.radius, "m", 0.0)
@@ -89,7 +96,7 @@ def _check_motion(obj) -> None:
 
 
 @dataclass(frozen=True)
-class Capsule:
+class Capsule(_Body):
     """A rigid capsule (a cylinder with hemispherical ends): every point within ``radius`` of the segment from
     ``start`` to ``end``. Fixed in space, or free when it has a density. Contact with it needs the 3-D rod model."""
 
@@ -99,14 +106,6 @@ class Capsule:
     """One end of the axis, world frame [m] (at t = 0, for a free capsule)."""
     end: tuple[float, float, float]
     """The other end of the axis, world frame [m]."""
-    density: float | None = None
-    """Mass density [kg/m³] of a free capsule; None for a capsule fixed in space."""
-    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    """Initial velocity of a free capsule [m/s]."""
-
-    @property
-    def free(self) -> bool:
-        return self.density is not None
 
     def __post_init__(self) -> None:
         check_range("Capsule", "radius", self.radius, "m", 0.0)
