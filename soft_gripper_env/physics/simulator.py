@@ -120,7 +120,7 @@ class Simulator:
         self._object = None
         self._body = None
         obj = scene.grasped_object
-        if obj is not None and getattr(obj, "free", False):
+        if obj is not None and obj.free:
             self._body = BodyModel.from_scene(obj, scene.forces)
             directions = self.disc.finger_directions
             if scene.model == "3d":
@@ -360,11 +360,24 @@ class Simulator:
         residual = mass_term * (q_flat - q_pred_flat) - force.reshape(R, n)
         return converged, iterations, ratio, residual
 
+    def _contact_changes(self, q, q_old, residual, held, starts, ends, radii, searched, shift, hold_at):
+        """The corrector's test after a solve: the holds whose normal reaction turned adhesive, the free nodes that
+        penetrate the object (their hold points written into ``hold_at``), and which rods changed (R,)."""
+        R, N, S, D = self.n_rods, self.disc.n_nodes, self.disc.stride, self.disc.dim
+        reaction = residual.reshape(R, N, S)[..., :D] * held[..., None]
+        outward = q[..., :D] - closest_points(q[..., :D], starts, ends)
+        normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
+        adhesive = held & (normal_reaction < 0.0)
+        new_hold = np.zeros((R, N), dtype=bool)
+        found = find_penetrations(q[..., :D], q_old[..., :D], shift, starts, ends, radii, held, searched,
+                                  self._first_free_node, PENETRATION_TOLERANCE, new_hold, hold_at)
+        return adhesive, new_hold, adhesive.any(axis=1) | (found > 0)
+
     def _solve_with_contact(self, state, q_start, q_old, q_pred, frames_old, kbar, dt):
         """The predictor–corrector (see :mod:`.contact`): solve, release adhesive holds, hold new penetrations, and
         solve the rods that changed again, until none does or the corrector's budget is spent."""
         disc = self.disc
-        R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
+        R, N, D = self.n_rods, disc.n_nodes, disc.dim
         held = state.held.reshape(R, N).copy() if state.held is not None else np.zeros((R, N), dtype=bool)
         hold_at = q_old[..., :D].copy()  # nodes already held stay where they are
         q = q_start.copy()
@@ -381,14 +394,8 @@ class Simulator:
             solved = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt, self._free_mask(held), rods)
             for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
                 total[rods] = part[rods]
-            reaction = residual.reshape(R, N, S)[..., :D] * held[..., None]
-            outward = q[..., :D] - closest_points(q[..., :D], starts, ends)
-            normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
-            adhesive = held & (normal_reaction < 0.0)
-            new_hold = np.zeros((R, N), dtype=bool)
-            found = find_penetrations(q[..., :D], q_old[..., :D], self._no_shift, starts, ends, radii, held, searched,
-                                      self._first_free_node, PENETRATION_TOLERANCE, new_hold, hold_at)
-            changed = adhesive.any(axis=1) | (found > 0)
+            adhesive, new_hold, changed = self._contact_changes(q, q_old, residual, held, starts, ends, radii,
+                                                                searched, self._no_shift, hold_at)
             if not changed.any() or k == self.scene.contact.max_corrector_iterations:
                 break
             held = (held & ~adhesive) | new_hold
@@ -426,19 +433,13 @@ class Simulator:
                 q, q_old, q_pred, frames_old, kbar, state.time, dt, held, offsets, body_old)
             position, orientation = body[0], body[2]
             starts, ends, radii = self._body_in_rod_frames(position, orientation)
-            reaction = residual.reshape(R, N, disc.stride)[..., :D] * held[..., None]
-            outward = q[..., :D] - closest_points(q[..., :D], starts, ends)
-            normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
-            adhesive = held & (normal_reaction < 0.0)
-            new_hold = np.zeros((R, N), dtype=bool)
             hold_at = np.zeros((R, N, D))
             shift = np.einsum("rdj,rj->rd", self._projection, np.repeat(position - body_old[0], self.n_fingers, axis=0))
             # search only fingers the body can reach: its segment within L + R of the palm (the rods' origin)
             palm = closest_points(np.zeros((R, 1, D)), starts, ends)[:, 0]
             searched = (radii > 0) & (np.linalg.norm(palm, axis=1) < self.scene.gripper.finger.length + radii)
-            found = find_penetrations(q[..., :D], q_old[..., :D], shift, starts, ends, radii, held, searched,
-                                      self._first_free_node, PENETRATION_TOLERANCE, new_hold, hold_at)
-            changed = adhesive.any(axis=1) | (found > 0)
+            adhesive, new_hold, changed = self._contact_changes(q, q_old, residual, held, starts, ends, radii,
+                                                                searched, shift, hold_at)
             if not changed.any() or k == self.scene.contact.max_corrector_iterations:
                 break
             # the offset of a new hold, in the body's frame at the end of this solve
