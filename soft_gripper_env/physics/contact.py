@@ -197,9 +197,15 @@ def closest_points(positions: np.ndarray, start: np.ndarray, end: np.ndarray) ->
 def reachable(obj: GraspedObject, finger_directions: np.ndarray, length: float, planar: bool) -> np.ndarray:
     """Which fingers can touch the object at all, (F,) bool: those whose base (the palm centre) lies within L + R
     of the object's segment, as the rod sees it. Contact is never searched for the others."""
-    start, end, radius = object_in_rod_frames(obj, finger_directions, planar)
-    palm = closest_points(np.zeros((len(start), 1, start.shape[1])), start, end)[:, 0]
-    return (np.linalg.norm(palm, axis=1) < length + radius) & (radius > 0)
+    return within_reach(*object_in_rod_frames(obj, finger_directions, planar), length)
+
+
+def within_reach(starts: np.ndarray, ends: np.ndarray, radii: np.ndarray, length: float) -> np.ndarray:
+    """Which rods (R,) can touch an object given as they see it (segment ends (R, D), radius (R,)): the object
+    must exist in the rod's frame (radius > 0) and its segment lie within ``length`` + radius of the palm, the
+    rods' origin."""
+    palm = closest_points(np.zeros((len(starts), 1, starts.shape[1])), starts, ends)[:, 0]
+    return (np.linalg.norm(palm, axis=1) < length + radii) & (radii > 0)
 
 
 @njit(cache=True)

@@ -28,6 +28,7 @@ from .contact import (
     find_penetrations,
     object_in_rod_frames,
     reachable,
+    within_reach,
 )
 from .discretization import Discretization
 from .forces import StepContext
@@ -419,8 +420,8 @@ class Simulator:
 
     def _solve_with_body(self, state, q_start, q_old, q_pred, frames_old, kbar, dt):
         """Predictor–corrector contact with a free sphere: each solve moves rods and body together
-        (:meth:`_newton_with_body`); new penetrations are held at their projection onto the body's surface, with
-        their offset in the body's frame, and adhesive holds are released, until nothing changes."""
+        (:meth:`_newton_with_body`); new penetrations are held where they entered the body's surface, with their
+        offset in the body's frame, and adhesive holds are released, until nothing changes."""
         disc = self.disc
         R, N, D = self.n_rods, disc.n_nodes, disc.dim
         held = state.held.reshape(R, N).copy()
@@ -435,9 +436,7 @@ class Simulator:
             starts, ends, radii = self._body_in_rod_frames(position, orientation)
             hold_at = np.zeros((R, N, D))
             shift = np.einsum("rdj,rj->rd", self._projection, np.repeat(position - body_old[0], self.n_fingers, axis=0))
-            # search only fingers the body can reach: its segment within L + R of the palm (the rods' origin)
-            palm = closest_points(np.zeros((R, 1, D)), starts, ends)[:, 0]
-            searched = (radii > 0) & (np.linalg.norm(palm, axis=1) < self.scene.gripper.finger.length + radii)
+            searched = within_reach(starts, ends, radii, self.scene.gripper.finger.length)
             adhesive, new_hold, changed = self._contact_changes(q, q_old, residual, held, starts, ends, radii,
                                                                 searched, shift, hold_at)
             if not changed.any() or k == self.scene.contact.max_corrector_iterations:
