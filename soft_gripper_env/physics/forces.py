@@ -50,6 +50,9 @@ class StepContext:
     """∂v/∂q of the integrator [1/s]."""
     acceleration_derivative: float
     """∂a/∂q of the integrator [1/s²]."""
+    water_velocity: np.ndarray | None = None
+    """The water's velocity at every rod in its coordinates [m/s], (R, D): the simulator fills it from each
+    gripper's own current. None (a model evaluated on its own) means the model's own current."""
 
 
 class ForceModel:

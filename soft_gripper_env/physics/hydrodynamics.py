@@ -45,7 +45,7 @@ WATER_DENSITY = 1000.0
 
 @dataclass(frozen=True)
 class Current:
-    """A uniform water current u(t) = velocity + oscillation·sin(2π·t/period) [m/s], world frame."""
+    """A uniform water current u(t) = velocity + oscillation·sin(2π·t/period + phase) [m/s], world frame."""
 
     velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """Mean current [m/s]."""
@@ -53,6 +53,8 @@ class Current:
     """Amplitude of the oscillating part [m/s]."""
     period: float = 1.0
     """Period of the oscillating part [s]."""
+    phase: float = 0.0
+    """Phase of the oscillating part at t = 0 [rad]."""
 
     def __post_init__(self) -> None:
         for name in ("velocity", "oscillation"):
@@ -63,35 +65,53 @@ class Current:
                 check_range("Current", name, v, "m/s", -100.0, 100.0, low_inclusive=True)
             object.__setattr__(self, name, value)
         check_range("Current", "period", self.period, "s", 0.0)
+        check_range("Current", "phase", self.phase, "rad", -1e3, 1e3, low_inclusive=True)
 
     def at(self, time: float) -> np.ndarray:
         """Current velocity at ``time`` [m/s], (3,)."""
-        return np.asarray(self.velocity) + np.asarray(self.oscillation) * math.sin(2 * math.pi * time / self.period)
+        return CurrentBatch.of((self,)).at(time)[0]
 
-    @property
-    def still(self) -> bool:
-        """Whether there is no current at all."""
-        return not any(self.velocity) and not any(self.oscillation)
+
+class CurrentBatch:
+    """The currents of a batch of grippers, as arrays: mean and amplitude (B, 3) [m/s], period (B,) [s], phase (B,)
+    [rad]. A gripper's entry is replaced with :meth:`load`."""
+
+    def __init__(self, batch_size: int) -> None:
+        self.velocity = np.zeros((batch_size, 3))
+        self.oscillation = np.zeros((batch_size, 3))
+        self.period = np.ones(batch_size)
+        self.phase = np.zeros(batch_size)
+
+    @classmethod
+    def of(cls, currents) -> CurrentBatch:
+        batch = cls(len(currents))
+        for index, current in enumerate(currents):
+            batch.load(index, current)
+        return batch
+
+    def load(self, index: int, current: Current) -> None:
+        self.velocity[index] = current.velocity
+        self.oscillation[index] = current.oscillation
+        self.period[index] = current.period
+        self.phase[index] = current.phase
+
+    def at(self, time: float) -> np.ndarray:
+        """The water's velocity at every gripper at ``time`` [m/s], (B, 3)."""
+        return self.velocity + self.oscillation * np.sin(2 * math.pi * time / self.period + self.phase)[:, None]
+
+
+def rod_water_velocity(disc: Discretization, water_velocity: np.ndarray) -> np.ndarray:
+    """The water's velocity per gripper (B, 3) as each rod sees it, (R, D) [m/s]: world (3-D) or in the finger's
+    vertical plane (planar; the component across the plane would push a finger that cannot move that way)."""
+    if disc.dim == 3:
+        return np.repeat(water_velocity, len(disc.finger_directions), axis=0)
+    along = water_velocity @ disc.finger_directions.T  # (B, F)
+    vertical = np.broadcast_to(water_velocity[:, 2:3], along.shape)
+    return np.stack([along, vertical], axis=-1).reshape(-1, 2)
 
 
 def _edge_diameter(disc: Discretization) -> np.ndarray:
     return disc.node_radius[:-1] + disc.node_radius[1:]
-
-
-@lru_cache(maxsize=64)
-def _still_water(dim: int, n_rods: int) -> np.ndarray:
-    return np.zeros((n_rods, dim))
-
-
-def _rod_current(disc: Discretization, current: Current, time: float, n_rods: int) -> np.ndarray:
-    """The current in each rod's coordinates, (R, D): world (3-D) or the finger's vertical plane (planar)."""
-    if current.still:
-        return _still_water(disc.dim, n_rods)
-    current = current.at(time)
-    if disc.dim == 3:
-        return np.broadcast_to(current, (n_rods, 3))
-    in_plane = np.stack([disc.finger_directions @ current, np.full(len(disc.finger_directions), current[2])], axis=1)
-    return np.tile(in_plane, (n_rods // len(in_plane), 1))
 
 
 @dataclass(frozen=True)
@@ -117,7 +137,10 @@ class MorisonDrag(ForceModel):
 
     def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
         normal, tangential = self.edge_coefficients(disc)
-        current = _rod_current(disc, self.current, ctx.time, positions.shape[0])
+        current = ctx.water_velocity
+        if current is None:  # standalone use: the model's own current at every rod
+            n_grippers = positions.shape[0] // len(disc.finger_directions)
+            current = rod_water_velocity(disc, np.tile(self.current.at(ctx.time), (n_grippers, 1)))
         morison_drag(positions, velocities, current, normal, tangential, ctx.velocity_derivative, disc.stride, force,
                      system_band)
 
@@ -259,4 +282,5 @@ def fluid_forces(medium: str) -> tuple[ForceModel, ...]:
     raise ValueError(f"medium = {medium!r} is not one of 'air', 'stokes', 'water'")
 
 
-__all__ = ["WATER_DENSITY", "Current", "MorisonDrag", "AddedMass", "fluid_forces", "morison_drag", "added_mass"]
+__all__ = ["WATER_DENSITY", "Current", "CurrentBatch", "rod_water_velocity", "MorisonDrag", "AddedMass",
+           "fluid_forces", "morison_drag", "added_mass"]

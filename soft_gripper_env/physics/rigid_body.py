@@ -32,13 +32,12 @@ body is neglected.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 
 from .forces import Buoyancy, Gravity
-from .hydrodynamics import AddedMass, Current, MorisonDrag
+from .hydrodynamics import AddedMass, MorisonDrag
 from .linalg import factor_banded_symmetric, solve_factored
 
 SPHERE_DRAG_COEFFICIENT = 0.47
@@ -47,30 +46,42 @@ SPHERE_ADDED_MASS_COEFFICIENT = 0.5
 """C_a of a sphere (dimensionless): its added mass is half the displaced fluid's."""
 
 
-@dataclass(frozen=True, eq=False)
 class BodyModel:
-    """Mass properties and external loads of a free sphere or capsule in a scene (body frame = world at t = 0)."""
+    """Mass properties and external loads of the free spheres or capsules of a batch of B grippers, one each, as
+    arrays with a leading batch axis (body frame = world at t = 0). :meth:`load` sets one gripper's body."""
 
-    mass: float
-    """m [kg]."""
-    inertia: np.ndarray
-    """Rotational inertia about the centre, body frame [kg·m²], (3, 3)."""
-    added_mass: np.ndarray
-    """Added-mass tensor, body frame [kg], (3, 3)."""
-    weight: float
-    """Net weight along −z, (m − ρ_w·V)·g [N]."""
-    normal_drag: float
-    """½·ρ_w·C_n·D·h of a capsule's cylinder, on the velocity normal to its axis [kg/m]; 0 for a sphere."""
-    isotropic_drag: float
-    """½·ρ_w·C_d·π·r² of the sphere (or a capsule's two end caps together) [kg/m]."""
-    axis: np.ndarray
-    """The capsule's axis in the body frame (3,); any unit vector for a sphere."""
-    segment: tuple[np.ndarray, np.ndarray]
-    """The object's segment ends relative to its centre, body frame [m] (both zero for a sphere)."""
-    current: Current | None
+    def __init__(self, forces, batch_size: int) -> None:
+        self._gravity = sum(f.acceleration for f in forces if isinstance(f, Gravity))
+        self._buoyancy = sum(f.fluid_density * f.acceleration for f in forces if isinstance(f, Buoyancy))
+        added = [f for f in forces if isinstance(f, AddedMass)]
+        self._added_mass = (sum(f.coefficient * f.fluid_density for f in added),
+                            sum(SPHERE_ADDED_MASS_COEFFICIENT * f.fluid_density for f in added))
+        morison = [f for f in forces if isinstance(f, MorisonDrag)]
+        self._drag = (sum(0.5 * f.fluid_density * f.normal_coefficient for f in morison),
+                      sum(0.5 * f.fluid_density * SPHERE_DRAG_COEFFICIENT for f in morison))
+        B = batch_size
+        self.radius = np.zeros(B)
+        """Radius of each body [m], (B,)."""
+        self.mass = np.zeros(B)
+        """m [kg], (B,)."""
+        self.inertia = np.zeros((B, 3, 3))
+        """Rotational inertia about the centre, body frame [kg·m²], (B, 3, 3)."""
+        self.added_mass = np.zeros((B, 3, 3))
+        """Added-mass tensor, body frame [kg], (B, 3, 3)."""
+        self.weight = np.zeros(B)
+        """Net weight along −z, (m − ρ_w·V)·g [N], (B,)."""
+        self.normal_drag = np.zeros(B)
+        """½·ρ_w·C_n·D·h of a capsule's cylinder, on the velocity normal to its axis [kg/m]; 0 for a sphere."""
+        self.isotropic_drag = np.zeros(B)
+        """½·ρ_w·C_d·π·r² of the sphere (or a capsule's two end caps together) [kg/m]."""
+        self.axis = np.tile([0.0, 0.0, 1.0], (B, 1))
+        """The capsule's axis in the body frame (B, 3); any unit vector for a sphere."""
+        self.segment = (np.zeros((B, 3)), np.zeros((B, 3)))
+        """The object's segment ends relative to its centre, body frame [m], (B, 3) each (zero for a sphere)."""
 
-    @classmethod
-    def from_scene(cls, obj, forces) -> BodyModel:
+    def load(self, index: int, obj) -> None:
+        """Sets gripper ``index``'s body to the free :class:`~.contact.Sphere` or :class:`~.contact.Capsule`
+        ``obj``."""
         r = obj.radius
         start, end = (np.asarray(p, dtype=float) for p in obj.segment)
         center = 0.5 * (start + end)
@@ -80,43 +91,42 @@ class BodyModel:
         across = np.eye(3) - along
         cylinder, caps = math.pi * r**2 * length, 4.0 / 3.0 * math.pi * r**3
         m_cylinder, m_caps = obj.density * cylinder, obj.density * caps
-        inertia = (m_cylinder * r**2 / 2 + m_caps * 2 * r**2 / 5) * along + (
+        self.radius[index] = r
+        self.mass[index] = m_cylinder + m_caps
+        self.inertia[index] = (m_cylinder * r**2 / 2 + m_caps * 2 * r**2 / 5) * along + (
             m_cylinder * (length**2 / 12 + r**2 / 4) + m_caps * (2 * r**2 / 5 + length**2 / 4 + 3 * length * r / 8)
         ) * across
-        gravity = sum(f.acceleration for f in forces if isinstance(f, Gravity))
-        buoyancy = sum(f.fluid_density * f.acceleration * (cylinder + caps) for f in forces if isinstance(f, Buoyancy))
-        added = sum((f.coefficient * f.fluid_density * cylinder * across
-                     + SPHERE_ADDED_MASS_COEFFICIENT * f.fluid_density * caps * np.eye(3)) for f in forces
-                    if isinstance(f, AddedMass)) + np.zeros((3, 3))
-        morison = [f for f in forces if isinstance(f, MorisonDrag)]
-        normal_drag = sum(0.5 * f.fluid_density * f.normal_coefficient * 2 * r * length for f in morison)
-        isotropic = sum(0.5 * f.fluid_density * SPHERE_DRAG_COEFFICIENT * math.pi * r**2 for f in morison)
-        return cls(mass=m_cylinder + m_caps, inertia=inertia, added_mass=added,
-                   weight=(m_cylinder + m_caps) * gravity - buoyancy, normal_drag=normal_drag,
-                   isotropic_drag=isotropic, axis=axis, segment=(start - center, end - center),
-                   current=morison[0].current if morison else None)
+        self.added_mass[index] = self._added_mass[0] * cylinder * across + self._added_mass[1] * caps * np.eye(3)
+        self.weight[index] = (m_cylinder + m_caps) * self._gravity - self._buoyancy * (cylinder + caps)
+        self.normal_drag[index] = self._drag[0] * 2 * r * length
+        self.isotropic_drag[index] = self._drag[1] * math.pi * r**2
+        self.axis[index] = axis
+        self.segment[0][index] = start - center
+        self.segment[1][index] = end - center
 
-    def residual(self, c, c_old, u_old, theta, w_old, orientation, orientation_old, dt, time):
+    def residual(self, c, c_old, u_old, theta, w_old, orientation, orientation_old, dt, water_velocity):
         """The body's own residual (B, 6) (inertia minus external loads), and the diagonal blocks of its Jacobian
-        for translation and rotation, (B, 3, 3) each. ``orientation`` is the end-of-step R, (B, 3, 3)."""
+        for translation and rotation, (B, 3, 3) each. ``orientation`` is the end-of-step R, (B, 3, 3);
+        ``water_velocity`` the current at each body (B, 3) [m/s]."""
         u = (c - c_old) / dt
         # translational inertia with the start-of-step orientation, as for the rods' added mass
-        mass = self.mass * np.eye(3) + orientation_old @ self.added_mass @ orientation_old.transpose(0, 2, 1)
+        mass = self.mass[:, None, None] * np.eye(3) + orientation_old @ self.added_mass @ orientation_old.transpose(
+            0, 2, 1)
         force = np.zeros_like(c)
         force[:, 2] -= self.weight
         jacobian = mass / dt**2
-        w = u - (self.current.at(time) if self.current is not None else 0.0)
+        w = u - water_velocity
+        axis = np.einsum("bij,bj->bi", orientation, self.axis)
         for coefficient, normal_only in ((self.isotropic_drag, False), (self.normal_drag, True)):
-            if not coefficient:
+            if not coefficient.any():
                 continue
-            axis = orientation @ self.axis
             part = w - np.sum(w * axis, axis=1, keepdims=True) * axis if normal_only else w
             speed = np.linalg.norm(part, axis=1, keepdims=True)
-            force -= coefficient * speed * part
+            force -= coefficient[:, None] * speed * part
             projector = np.eye(3) - axis[:, :, None] * axis[:, None, :] if normal_only else np.eye(3)
             safe = np.where(speed > 0, speed, 1.0)
-            jacobian = jacobian + coefficient / dt * (speed[..., None] * projector
-                                                       + part[:, :, None] * part[:, None, :] / safe[..., None])
+            jacobian = jacobian + (coefficient / dt)[:, None, None] * (
+                speed[..., None] * projector + part[:, :, None] * part[:, None, :] / safe[..., None])
         inertia_new = orientation @ self.inertia @ orientation.transpose(0, 2, 1)
         inertia_old = orientation_old @ self.inertia @ orientation_old.transpose(0, 2, 1)
         momentum_change = (np.einsum("bij,bj->bi", inertia_new, theta / dt)

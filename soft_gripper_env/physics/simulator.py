@@ -15,7 +15,7 @@ solved by Newton's method started from the predictor q_old + Δt·v_old.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -32,6 +32,7 @@ from .contact import (
 )
 from .discretization import Discretization
 from .forces import StepContext
+from .hydrodynamics import Current, CurrentBatch, MorisonDrag, rod_water_velocity
 from .integrators import INTEGRATORS
 from .linalg import newton_iteration
 from .rigid_body import BodyModel, eliminate_rods, rotation_exp
@@ -103,12 +104,25 @@ class Simulator:
     >>> result = sim.step(state, natural_curvature=-0.15 * state.time)
     """
 
-    def __init__(self, scene: Scene, batch_size: int = 1) -> None:
+    def __init__(self, scene: Scene | Sequence[Scene], batch_size: int | None = None) -> None:
+        scenes = [scene] if isinstance(scene, Scene) else list(scene)
+        if not scenes or not all(isinstance(s, Scene) for s in scenes):
+            raise ValueError("Simulator.scene must be a Scene or a non-empty sequence of Scenes")
+        if batch_size is None:
+            batch_size = len(scenes) if len(scenes) > 1 else 1
         if not isinstance(batch_size, (int, np.integer)) or not 1 <= batch_size <= 10_000_000:
             raise ValueError(f"Simulator.batch_size = {batch_size!r} (count) is outside the allowed range "
                              f"[1, 10000000]")
-        self.scene = scene
-        self.batch_size = int(batch_size)
+        if len(scenes) not in (1, batch_size):
+            raise ValueError(f"Simulator got {len(scenes)} scenes for batch_size = {batch_size}: give one scene, "
+                             f"or one per gripper")
+        self.scene = scene = scenes[0]
+        """The batch's first scene; every structural setting (gripper, forces, model, time step) is the same in
+        all."""
+        self.batch_size = B = int(batch_size)
+        self.scenes = scenes * B if len(scenes) == 1 else scenes
+        """Each gripper's scene: they differ at most in the grasped object's size, place, density and velocity,
+        and in the water's current (:meth:`set_scene`)."""
         self.disc = Discretization.from_scene(scene)
         self._integrator = INTEGRATORS[scene.integrator]
         self._subsimulators: dict[int, Simulator] = {}
@@ -118,27 +132,58 @@ class Simulator:
         self._all_rods = np.ones(self.n_rods, dtype=bool)
         self._no_shift = np.zeros((self.n_rods, self.disc.dim))
         self._first_free_node = 0 if scene.gripper.finger.clamp == "free" else 2
+        self._structure = _structure(scene)
+        drag = [f for f in scene.forces if isinstance(f, MorisonDrag)]
+        self._currents = CurrentBatch(B) if drag else None
         self._object = None
         self._body = None
         obj = scene.grasped_object
         if obj is not None and obj.free:
-            self._body = BodyModel.from_scene(obj, scene.forces)
+            self._body = BodyModel(scene.forces, B)
             directions = self.disc.finger_directions
             if scene.model == "3d":
                 projection = np.broadcast_to(np.eye(3), (len(directions), 3, 3))
             else:
                 projection = np.stack([directions, np.tile([0.0, 0.0, 1.0], (len(directions), 1))], axis=1)
-            self._projection = np.tile(projection, (self.batch_size, 1, 1))  # rod coordinates from world, (R, D, 3)
+            self._projection = np.tile(projection, (B, 1, 1))  # rod coordinates from world, (R, D, 3)
             force_tolerance = self.disc.residual_scale[-1]  # a force DOF's: relative_tolerance·EI/L² [N]
             length = scene.gripper.finger.length
             self._body_tolerance = np.repeat([force_tolerance, force_tolerance * length], 3)  # [N], [N·m]
         elif obj is not None:
+            R, D = self.n_rods, self.disc.dim
+            self._object = (np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), np.zeros(R, dtype=bool))
+        for index, each in enumerate(self.scenes):
+            self._load(index, each)
+
+    def set_scene(self, index: int, scene: Scene) -> None:
+        """Gives gripper ``index`` another scene, which may differ from the batch's only in the grasped object's
+        size, place, density and velocity, and in the current (e.g. a new episode of one environment of a vector).
+        The new scene applies to states made by :meth:`initial_state` from now on."""
+        if not 0 <= index < self.batch_size:
+            raise ValueError(f"index = {index} is outside the allowed range [0, {self.batch_size - 1}]")
+        if _structure(scene) != self._structure:
+            raise ValueError("Simulator.set_scene: the scene differs from the batch's in more than the grasped "
+                             "object's size, place, density and velocity and the water's current")
+        self.scenes[index] = scene
+        self._load(index, scene)
+
+    def _load(self, index: int, scene: Scene) -> None:
+        """Writes gripper ``index``'s object and current into the per-gripper arrays."""
+        if index > 0 and _structure(scene) != self._structure:
+            raise ValueError(f"Simulator.scene[{index}] differs from scene[0] in more than the grasped object's size, "
+                             f"place, density and velocity and the water's current")
+        if self._currents is not None:
+            self._currents.load(index, next(f for f in scene.forces if isinstance(f, MorisonDrag)).current)
+        obj = scene.grasped_object
+        if self._body is not None:
+            self._body.load(index, obj)
+        elif self._object is not None:
+            F = self.n_fingers
             planar = scene.model == "planar"
-            starts, ends, radii = object_in_rod_frames(scene.grasped_object, self.disc.finger_directions, planar)
-            searched = reachable(scene.grasped_object, self.disc.finger_directions, scene.gripper.finger.length,
-                                 planar)
-            self._object = (np.tile(starts, (self.batch_size, 1)), np.tile(ends, (self.batch_size, 1)),
-                            np.tile(radii, self.batch_size), np.tile(searched, self.batch_size))
+            rods = slice(index * F, (index + 1) * F)
+            starts, ends, radii = object_in_rod_frames(obj, self.disc.finger_directions, planar)
+            self._object[0][rods], self._object[1][rods], self._object[2][rods] = starts, ends, radii
+            self._object[3][rods] = reachable(obj, self.disc.finger_directions, scene.gripper.finger.length, planar)
 
     @property
     def n_fingers(self) -> int:
@@ -162,10 +207,10 @@ class Simulator:
             state = replace(state, tangent=tangent, director=director,
                             reference_twist=np.zeros(q.shape[:3]))
         if self._body is not None:
-            B, obj = self.batch_size, self.scene.grasped_object
-            center = 0.5 * (obj.segment[0] + obj.segment[1])
+            B, objects = self.batch_size, [s.grasped_object for s in self.scenes]
+            centers = np.array([0.5 * (obj.segment[0] + obj.segment[1]) for obj in objects])
             state = replace(state, held=np.zeros(q.shape[:3], dtype=bool), hold_offset=np.zeros(q.shape[:3] + (3,)),
-                            body_position=np.tile(center, (B, 1)), body_velocity=np.tile(obj.velocity, (B, 1)),
+                            body_position=centers, body_velocity=np.array([obj.velocity for obj in objects]),
                             body_orientation=np.tile(np.eye(3), (B, 1, 1)), body_angular_velocity=np.zeros((B, 3)))
         return state
 
@@ -233,7 +278,7 @@ class Simulator:
         failed = np.nonzero(~result.converged)[0]
         if halvings == 0 or failed.size == 0:
             return result
-        sub = self._subsimulator(failed.size)
+        sub = self._subsimulator(failed)
         sub_kbar = kbar.reshape(self.batch_size, -1)[failed].ravel()
         first = sub._step_adaptive(_take(state, failed), sub_kbar, 0.5 * dt, halvings - 1)
         second = sub._step_adaptive(first.state, sub_kbar, 0.5 * dt, halvings - 1)
@@ -249,11 +294,16 @@ class Simulator:
                           residual=_set(result.residual, failed, np.maximum(first.residual, second.residual)),
                           contact=contact, substeps=_set(result.substeps, failed, first.substeps + second.substeps))
 
-    def _subsimulator(self, batch_size: int) -> Simulator:
-        """A simulator of the same scene for ``batch_size`` grippers, kept for reuse."""
-        if batch_size not in self._subsimulators:
-            self._subsimulators[batch_size] = Simulator(self.scene, batch_size)
-        return self._subsimulators[batch_size]
+    def _subsimulator(self, grippers: np.ndarray) -> Simulator:
+        """A simulator of the scenes of ``grippers`` (indices), kept for reuse by their count."""
+        scenes = [self.scenes[i] for i in grippers]
+        sub = self._subsimulators.get(len(scenes))
+        if sub is None:
+            sub = self._subsimulators[len(scenes)] = Simulator(scenes)
+        for index, scene in enumerate(scenes):
+            if sub.scenes[index] is not scene:
+                sub.set_scene(index, scene)
+        return sub
 
     def equilibrium(self, state: RodState, natural_curvature, max_steps: int = 200) -> StepResult:
         """The static equilibrium reached from ``state`` with κ̄ held fixed, by pseudo-transient continuation.
@@ -311,8 +361,9 @@ class Simulator:
             rod3d_elastic(q, *frames_old, disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness,
                           disc.twist_stiffness, disc.voronoi_length, kbar, force, band, hessian)
         if self.scene.forces:
+            water = None if self._currents is None else rod_water_velocity(disc, self._currents.at(time))
             ctx = StepContext(time=time, start_positions=q_old[..., :D], velocity_derivative=1.0 / dt,
-                              acceleration_derivative=1.0 / dt**2)
+                              acceleration_derivative=1.0 / dt**2, water_velocity=water)
             velocity = (q[..., :D] - q_old[..., :D]) / dt
             acceleration = (q[..., :D] - q_pred[..., :D]) / dt**2
             for model in self.scene.forces:
@@ -408,11 +459,12 @@ class Simulator:
                             orientations: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A free body at ``centers`` (B, 3) turned by ``orientations`` (B, 3, 3) as each rod sees it: its segment's
         ends (R, D) and (R, D), and its radius (R,)."""
-        radius = self.scene.grasped_object.radius
+        radius = np.repeat(self._body.radius, self.n_fingers)
         directions = self.disc.finger_directions
         if self.disc.dim == 3:
-            ends = [np.repeat(centers + orientations @ point, self.n_fingers, axis=0) for point in self._body.segment]
-            return ends[0], ends[1], np.full(self.n_rods, radius)
+            ends = [np.repeat(centers + np.einsum("bij,bj->bi", orientations, point), self.n_fingers, axis=0)
+                    for point in self._body.segment]
+            return ends[0], ends[1], radius
         normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(self.n_fingers)], axis=1)
         distance = (centers @ normals.T).ravel()
         rod_centers = np.stack([(centers @ directions.T).ravel(), np.repeat(centers[:, 2], self.n_fingers)], axis=1)
@@ -496,6 +548,7 @@ class Simulator:
         max_iterations = self.scene.newton.max_iterations
         q_flat = q.reshape(R, n)
         held_positions = q[..., :D]
+        water = np.zeros((B, 3)) if self._currents is None else self._currents.at(time)
         for it in range(max_iterations + 1):
             orientation = rotation_exp(theta) @ orientation_old
             offsets_world = np.einsum("rij,rnj->rni", np.repeat(orientation, F, axis=0), offsets)
@@ -515,7 +568,7 @@ class Simulator:
             coupling *= held[..., None, None]
             coupling = coupling.reshape(R, n, 6)
             own, translational, rotational = self._body.residual(c, c_old, u_old, theta, w_old, orientation,
-                                                                 orientation_old, dt, time)
+                                                                 orientation_old, dt, water)
             body_residual = own + np.einsum("rnk,rn->rk", coupling, residual).reshape(B, F, 6).sum(axis=1)
             rod_ratio = np.max(np.abs(residual) * tolerance_inverse * free, axis=1).reshape(B, F).max(axis=1)
             basis = self._body_basis(held)  # the body's admissible motions (B, 6, k)
@@ -612,6 +665,16 @@ class Simulator:
                           newton_iterations=iterations.reshape(B, F).max(axis=1),
                           residual=ratio.reshape(B, F).max(axis=1), contact=contact,
                           substeps=np.ones(B, dtype=np.int64))
+
+
+def _structure(scene: Scene) -> tuple:
+    """What every gripper of a batch must share: the scene less its object's size, place, density and velocity,
+    and less the current."""
+    obj = scene.grasped_object
+    if obj is not None:
+        obj = (type(obj), obj.free)
+    forces = tuple(replace(f, current=Current()) if isinstance(f, MorisonDrag) else f for f in scene.forces)
+    return replace(scene, grasped_object=None, forces=forces), obj
 
 
 def _take(record, index: np.ndarray):

@@ -5,7 +5,16 @@ import math
 import numpy as np
 import pytest
 
-from soft_gripper_env.physics import PENETRATION_TOLERANCE, WATER_DENSITY, Capsule, Simulator, Sphere, paper_scene
+from soft_gripper_env.physics import (
+    PENETRATION_TOLERANCE,
+    WATER_DENSITY,
+    Capsule,
+    Current,
+    MorisonDrag,
+    Simulator,
+    Sphere,
+    paper_scene,
+)
 from soft_gripper_env.physics.config import replace
 from soft_gripper_env.physics.rigid_body import SPHERE_DRAG_COEFFICIENT
 
@@ -109,6 +118,55 @@ def test_free_sphere_batch_members_are_independent():
     np.testing.assert_array_equal(state.body_position[1], alone.body_position[0])
 
 
+def water_scene(model, sphere, current):
+    forces = tuple(replace(f, current=current) if isinstance(f, MorisonDrag) else f
+                   for f in paper_scene(model, medium="water").forces)
+    return replace(paper_scene(model, medium="water", grasped_object=sphere), forces=forces)
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_grippers_with_different_objects_and_currents_match_each_alone(model):
+    """One batch of grippers, each with its own sphere and current, steps each as a simulator of its own scene does,
+    to rounding (the batch's small array operations may sum in another order); a scene swapped in with set_scene
+    is then stepped as its own too."""
+    scenes = [water_scene(model, Sphere(0.05, (0.0, 0.0, -0.1), density=1100.0), Current()),
+              water_scene(model, Sphere(0.04, (0.01, -0.01, -0.09), density=1020.0, velocity=(0.0, 0.0, 0.05)),
+                          Current((0.02, -0.01, 0.0), (0.01, 0.02, 0.0), period=1.3, phase=0.4))]
+    batched = Simulator(scenes)
+    state = batched.initial_state()
+    alone = [Simulator(scene) for scene in scenes]
+    single = [sim.initial_state() for sim in alone]
+    for _ in range(60):
+        state = batched.step(state, -0.5 * state.time).state
+        single = [sim.step(s, -0.5 * s.time).state for sim, s in zip(alone, single, strict=True)]
+    assert state.held.any()
+    for b in range(2):
+        np.testing.assert_allclose(state.q[b], single[b].q[0], rtol=0, atol=1e-14)
+        np.testing.assert_allclose(state.body_position[b], single[b].body_position[0], rtol=0, atol=1e-14)
+    assert np.abs(state.body_position[0] - state.body_position[1]).max() > 1e-3
+
+    batched.set_scene(0, scenes[1])
+    state = batched.initial_state()
+    np.testing.assert_array_equal(state.body_position[0], state.body_position[1])
+    for _ in range(5):
+        state = batched.step(state, -0.5 * state.time).state
+    np.testing.assert_array_equal(state.q[0], state.q[1])
+
+
+def test_batch_scenes_must_share_their_structure():
+    sphere = Sphere(0.05, (0.0, 0.0, -0.1), density=1100.0)
+    scene = paper_scene("planar", medium="water", grasped_object=sphere)
+    with pytest.raises(ValueError, match=r"scene\[1\] differs from scene\[0\]"):
+        Simulator([scene, replace(scene, time_step=0.005)])
+    with pytest.raises(ValueError, match=r"2 scenes for batch_size = 3"):
+        Simulator([scene, scene], batch_size=3)
+    sim = Simulator(scene, batch_size=2)
+    with pytest.raises(ValueError, match=r"set_scene: the scene differs"):
+        sim.set_scene(1, replace(scene, grasped_object=Sphere(0.05, (0.0, 0.0, -0.1))))  # fixed, not free
+    with pytest.raises(ValueError, match=r"index = 2 is outside the allowed range \[0, 1\]"):
+        sim.set_scene(2, scene)
+
+
 @pytest.mark.parametrize("make, pattern", [
     (lambda: Sphere(0.05, (0, 0, 0), velocity=(0, 0, 1)), r"Sphere\.velocity needs Sphere\.density"),
     (lambda: Capsule(0.02, (0, 0, 0), (0, 0, 0.1), velocity=(1, 0, 0)), r"Capsule\.velocity needs Capsule\.density"),
@@ -145,12 +203,13 @@ def test_fingers_close_on_a_free_capsule():
 
     capsule = Capsule(0.04, (0.0, -0.05, -0.1), (0.0, 0.05, -0.1), density=1100.0)
     sim = Simulator(paper_scene("3d", medium="water", grasped_object=capsule))
+    capsule_ends = (np.array([0.0, -0.05, 0.0]), np.array([0.0, 0.05, 0.0]))  # in the body frame
     state = sim.initial_state()
     for _ in range(150):
         result = sim.step(state, max(-0.6 * state.time, -0.25))
         assert result.converged.all() and result.contact.resolved.all()
         state = result.state
-        ends = [np.repeat(state.body_position + state.body_orientation @ p, 3, axis=0) for p in sim._body.segment]
+        ends = [np.repeat(state.body_position + state.body_orientation[0] @ p, 3, axis=0) for p in capsule_ends]
         x = sim.world_positions(state)[0]
         distance = np.linalg.norm(x - closest_points(x, ends[0], ends[1]), axis=-1)
         assert distance.min() >= capsule.radius - PENETRATION_TOLERANCE
