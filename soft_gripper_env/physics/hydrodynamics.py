@@ -74,13 +74,15 @@ class Current:
 
 class CurrentBatch:
     """The currents of a batch of grippers, as arrays: mean and amplitude (B, 3) [m/s], period (B,) [s], phase (B,)
-    [rad]. A gripper's entry is replaced with :meth:`load`."""
+    [rad], and the batch time at which each gripper's own clock reads 0 (B,) [s]. A gripper's entry is replaced with
+    :meth:`load`."""
 
     def __init__(self, batch_size: int) -> None:
         self.velocity = np.zeros((batch_size, 3))
         self.oscillation = np.zeros((batch_size, 3))
         self.period = np.ones(batch_size)
         self.phase = np.zeros(batch_size)
+        self.start_time = np.zeros(batch_size)
 
     @classmethod
     def of(cls, currents) -> CurrentBatch:
@@ -97,7 +99,8 @@ class CurrentBatch:
 
     def at(self, time: float) -> np.ndarray:
         """The water's velocity at every gripper at ``time`` [m/s], (B, 3)."""
-        return self.velocity + self.oscillation * np.sin(2 * math.pi * time / self.period + self.phase)[:, None]
+        angle = 2 * math.pi * (time - self.start_time) / self.period + self.phase
+        return self.velocity + self.oscillation * np.sin(angle)[:, None]
 
 
 def rod_water_velocity(disc: Discretization, water_velocity: np.ndarray) -> np.ndarray:

@@ -155,10 +155,11 @@ class Simulator:
         for index, each in enumerate(self.scenes):
             self._load(index, each)
 
-    def set_scene(self, index: int, scene: Scene) -> None:
+    def set_scene(self, index: int, scene: Scene, start_time: float = 0.0) -> None:
         """Gives gripper ``index`` another scene, which may differ from the batch's only in the grasped object's
         size, place, density and velocity, and in the current (e.g. a new episode of one environment of a vector).
-        The new scene applies to states made by :meth:`initial_state` from now on."""
+        The new scene applies to states made by :meth:`initial_state` from now on. Its current runs on its own
+        clock, which reads 0 at the batch's time ``start_time`` [s]."""
         if not 0 <= index < self.batch_size:
             raise ValueError(f"index = {index} is outside the allowed range [0, {self.batch_size - 1}]")
         if _structure(scene) != self._structure:
@@ -166,6 +167,8 @@ class Simulator:
                              "object's size, place, density and velocity and the water's current")
         self.scenes[index] = scene
         self._load(index, scene)
+        if self._currents is not None:
+            self._currents.start_time[index] = start_time
 
     def _load(self, index: int, scene: Scene) -> None:
         """Writes gripper ``index``'s object and current into the per-gripper arrays."""
@@ -280,12 +283,12 @@ class Simulator:
             return result
         sub = self._subsimulator(failed)
         sub_kbar = kbar.reshape(self.batch_size, -1)[failed].ravel()
-        first = sub._step_adaptive(_take(state, failed), sub_kbar, 0.5 * dt, halvings - 1)
+        first = sub._step_adaptive(take_grippers(state, failed), sub_kbar, 0.5 * dt, halvings - 1)
         second = sub._step_adaptive(first.state, sub_kbar, 0.5 * dt, halvings - 1)
-        merged = replace(_put(result.state, failed, second.state), time=result.state.time)
+        merged = replace(put_grippers(result.state, failed, second.state), time=result.state.time)
         contact = result.contact
         if contact is not None:
-            contact = _put(contact, failed, replace(
+            contact = put_grippers(contact, failed, replace(
                 second.contact, corrector_iterations=first.contact.corrector_iterations
                 + second.contact.corrector_iterations))
         return StepResult(state=merged, converged=_set(result.converged, failed, first.converged & second.converged),
@@ -303,6 +306,8 @@ class Simulator:
         for index, scene in enumerate(scenes):
             if sub.scenes[index] is not scene:
                 sub.set_scene(index, scene)
+        if self._currents is not None:
+            sub._currents.start_time[:] = self._currents.start_time[grippers]
         return sub
 
     def equilibrium(self, state: RodState, natural_curvature, max_steps: int = 200) -> StepResult:
@@ -677,13 +682,13 @@ def _structure(scene: Scene) -> tuple:
     return replace(scene, grasped_object=None, forces=forces), obj
 
 
-def _take(record, index: np.ndarray):
+def take_grippers(record, index: np.ndarray):
     """The grippers ``index`` of a state or contact report (every array field has the batch axis first)."""
     return replace(record, **{name: value[index] for name, value in vars(record).items()
                               if isinstance(value, np.ndarray)})
 
 
-def _put(record, index: np.ndarray, part):
+def put_grippers(record, index: np.ndarray, part):
     """A copy of ``record`` whose grippers ``index`` are taken from ``part``."""
     return replace(record, **{name: _set(value, index, getattr(part, name)) for name, value in vars(record).items()
                               if isinstance(value, np.ndarray)})

@@ -1,0 +1,339 @@
+"""Gymnasium environments of the underwater grasp: one (:class:`SoftGripperUnderwaterEnv`) and a batched vector
+(:class:`SoftGripperUnderwaterVectorEnv`, for ``gym.make_vec``). Both are thin layers over
+:class:`~soft_gripper_env.grasp_task.GraspBatch`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from .grasp_task import GraspBatch, GraspTask, check_options, task_scene
+from .physics import NATURAL_CURVATURE_LIMIT
+
+DEFAULT_MAX_EPISODE_STEPS = 60
+"""Episode length of the registered environment: 60 actions of 0.05 s, 3 s."""
+_POSITION_BOUND = 0.5  # [m]; no node of a 0.2 m finger clamped at the palm gets farther
+_VELOCITY_BOUND = 10.0  # [m/s]
+_FORCE_BOUND = 100.0  # [N]
+_OBJECT_BOUND = 1.0  # [m]
+
+
+def observation_slices(task: GraspTask, n_nodes: int = 20, n_fingers: int = 3) -> dict[str, slice]:
+    """Where each part of the observation lies (see the env's spec sheet)."""
+    dim = 2 if task.model == "planar" else 3
+    sizes = {"node_positions": n_fingers * n_nodes * dim, "node_velocities": n_fingers * n_nodes * dim,
+             "natural_curvature": n_fingers, "normal_forces": n_fingers * n_nodes, "object_position": 3,
+             "object_velocity": 3}
+    ends = np.cumsum(list(sizes.values()))
+    return {name: slice(int(end - size), int(end)) for (name, size), end in zip(sizes.items(), ends, strict=True)}
+
+
+def observation_bounds(task: GraspTask, n_nodes: int = 20, n_fingers: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """The observation's low and high bounds (float32), part by part as in the spec sheet."""
+    dim = 2 if task.model == "planar" else 3
+    nodes = n_fingers * n_nodes * dim
+    low = np.concatenate([np.full(nodes, -_POSITION_BOUND), np.full(nodes, -_VELOCITY_BOUND),
+                          np.full(n_fingers, task.curvature_range[0]), np.zeros(n_fingers * n_nodes),
+                          np.full(3, -_OBJECT_BOUND), np.full(3, -_VELOCITY_BOUND)])
+    high = np.concatenate([np.full(nodes, _POSITION_BOUND), np.full(nodes, _VELOCITY_BOUND),
+                           np.full(n_fingers, task.curvature_range[1]), np.full(n_fingers * n_nodes, _FORCE_BOUND),
+                           np.full(3, _OBJECT_BOUND), np.full(3, _VELOCITY_BOUND)])
+    return low.astype(np.float32), high.astype(np.float32)
+
+
+def _observations(batch: GraspBatch, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """(B, obs_dim) float32, a new array, clipped to the space (only a failing solver could leave it)."""
+    parts = np.concatenate(list(batch.observation_parts().values()), axis=1)
+    return np.clip(np.nan_to_num(parts, nan=0.0), low, high).astype(np.float32)
+
+
+def _check_actions(action, shape: tuple[int, ...]) -> np.ndarray:
+    """The actions as float64 clipped to [−1, 1]; ValueError for a wrong shape or a value that is not finite."""
+    try:
+        array = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"action {action!r} is not numeric; expected shape {shape} in [-1, 1]") from None
+    if array.shape != shape:
+        raise ValueError(f"action has shape {array.shape}; expected {shape} in [-1, 1]")
+    if not np.isfinite(array).all():
+        raise ValueError(f"action {array.tolist()} must be finite (no NaN or inf); allowed range [-1, 1]")
+    return np.clip(array, -1.0, 1.0)
+
+
+def _infos(batch: GraspBatch, terms: dict[str, np.ndarray], failure: np.ndarray) -> dict[str, Any]:
+    """The per-episode diagnostics, (B,) arrays (the vector env's layout; the single env takes index 0)."""
+    return {
+        "reward_terms": terms,
+        "is_success": batch.is_success.copy(),
+        "solver_failure": failure.copy(),
+        "hold_time_s": batch.hold_time.copy(),
+        "finger_forces_N": batch.finger_force.copy(),
+        "natural_curvature": batch.natural_curvature.copy(),
+        "newton_iterations": batch.newton_iterations.copy(),
+        "time_s": batch.time.copy(),
+    }
+
+
+def _zero_terms(batch_size: int) -> dict[str, np.ndarray]:
+    return {name: np.zeros(batch_size) for name in ("contact", "hold", "rest", "overload", "effort")}
+
+
+class SoftGripperUnderwaterEnv(gym.Env):
+    """Three soft pneumatic fingers grasp a delicate, near-neutrally buoyant sphere in a weak, changing current.
+
+    The fingers are discrete elastic rods (the paper's gripper: L = 0.2 m, r = 0.02 m, 20 nodes, Elastosil) in water
+    (Morison drag, added mass, buoyancy), stepped implicitly every ``physics_dt``. The sphere is a free rigid body
+    under gravity, buoyancy, drag and added mass, coupled implicitly to the fingers by stick contact. Settings are
+    the fields of :class:`~soft_gripper_env.grasp_task.GraspTask`, as keyword arguments:
+    ``gym.make("SoftGripperUnderwater-v0", model="3d", control_dt=0.1)``.
+
+    **Action** ``Box(-1, 1, (3,), float32)``
+
+    ======  =========================================================  =====
+    index   meaning                                                    unit
+    ======  =========================================================  =====
+    0–2     natural-curvature rate of finger k, × ``max_curvature_rate`` 1/s
+            (1 1/s); negative closes the finger
+    ======  =========================================================  =====
+
+    κ̄ is integrated every physics step and saturates at ``curvature_range`` (−0.3 to 0: the maximum pressure, and
+    no pressure). Finite values outside [−1, 1] are clipped. NaN, inf, a wrong shape or a non-numeric action raise
+    ``ValueError``.
+
+    **Observation** ``Box(float32)``, in this order (F = 3 fingers, N = 20 nodes; D = 2 for the planar model, where
+    positions are (s, z) in each finger's vertical plane, s along the finger's direction from the palm centre; D = 3
+    in 3-D, world (x, y, z)):
+
+    ===============  ==========  ====================================================  ======  ==============
+    part             size        meaning                                               unit    bounds
+    ===============  ==========  ====================================================  ======  ==============
+    node positions   F·N·D       every node of every finger                            m       ±0.5
+    node velocities  F·N·D       their velocities                                      m/s     ±10
+    κ̄               F           present natural curvature per finger                  1       curvature_range
+    normal forces    F·N         compressive reaction of the object on each node      N       0 … 100
+    object position  3           sphere centre relative to the palm centre (world)     m       ±1
+    object velocity  3           sphere velocity relative to the palm (world)          m/s     ±10
+    ===============  ==========  ====================================================  ======  ==============
+
+    Sizes: 309 (planar), 429 (3-D). Values are clipped to the bounds, which only a failing solve could reach.
+
+    **Reward** (weights in :class:`~soft_gripper_env.grasp_task.RewardWeights`; every term is in
+    ``info["reward_terms"]``, and they sum to the reward):
+
+    =========  ===========================================================================  =============
+    term       value                                                                        range
+    =========  ===========================================================================  =============
+    contact    0.25 × fraction of fingers in compressive contact (Σ normal force ≥ 0.01 N)   [0, 0.25]
+    hold       1.0 × (1 − tanh(d / 0.03 m)), d the distance to the grasp point (0, 0, −0.1)  [0, 1]
+               m; only while all three fingers touch
+    rest       0.5 × (1 − tanh(|v| / 0.02 m/s)); only while all three fingers touch          [0, 0.5]
+    overload   −1.0 × tanh(excess / 0.5 N), excess of the largest finger force over the     [−1, 0]
+               fragility threshold 0.5 N
+    effort     −0.05 × mean(action²)                                                        [−0.05, 0]
+    =========  ===========================================================================  =============
+
+    **Episode.** Each reset draws (by ``self.np_random``) the sphere's radius (0.04–0.06 m), density (1000–1010
+    kg/m³) and start (grasp point ± (0.015, 0.015, 0.01) m), and a horizontal current: mean 0–0.02 m/s and an
+    oscillation of 0–0.02 m/s with a period of 1–3 s, in random directions and phase. ``reset(options=...)`` fixes
+    any of them: ``object_radius`` [m], ``object_density`` [kg/m³], ``object_offset`` (3,) [m],
+    ``current_velocity`` (3,) and ``current_oscillation`` (3,) [m/s], ``current_period`` [s], ``current_phase``
+    [rad]; and ``scene="paper"`` gives the paper's exact scene (its fixed ball, Stokes drag, no buoyancy) for
+    validation. An unknown key or a value out of its range raises ``ValueError``.
+
+    * ``info["is_success"]``: the object has been held — all three fingers in compressive contact, its centre within
+      0.03 m of the grasp point and slower than 0.02 m/s — for the last 1 s without a break.
+    * ``terminated``: the object is lost, more than 0.15 m from the grasp point.
+    * ``truncated``: the time limit (``max_episode_steps``, 60 steps = 3 s when made by ``gym.make``), or a physics
+      step whose Newton solve failed even after halving (``info["solver_failure"] = True``; the state is the last
+      good one, so observations are never NaN). A solver failure is neither the policy's success nor its fault,
+      so it truncates rather than terminates.
+    """
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 20}
+
+    def __init__(self, render_mode: str | None = None, **settings) -> None:
+        self.task = GraspTask(**settings)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode = {render_mode!r} is not one of None, 'rgb_array', 'human'")
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self.task.control_dt}
+        self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self._low, self._high = observation_bounds(self.task)
+        self.observation_space = spaces.Box(self._low, self._high, dtype=np.float32)
+        self._batch = GraspBatch(self.task, 1)
+        self._renderer = None
+        self._window = None
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        options = check_options(options)
+        scene = task_scene(self.task, self.np_random, options)
+        self._batch.reset([0], [scene], options.get("scene", "task"))
+        info = _single(_infos(self._batch, _zero_terms(1), np.zeros(1, dtype=bool)))
+        if self.render_mode == "human":
+            self.render()
+        return _observations(self._batch, self._low, self._high)[0], info
+
+    def step(self, action):
+        if self._batch.sim is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        action = _check_actions(action, (3,))
+        outcome = self._batch.step(action[None, :], np.ones(1, dtype=bool))
+        info = _single(_infos(self._batch, outcome.reward_terms, outcome.solver_failure))
+        if self.render_mode == "human":
+            self.render()
+        return (_observations(self._batch, self._low, self._high)[0], float(outcome.reward[0]),
+                bool(outcome.terminated[0]), bool(outcome.solver_failure[0]), info)
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; make the env with render_mode='rgb_array'")
+            return None
+        if self._batch.sim is None:
+            raise gym.error.ResetNeeded("call reset() before render()")
+        if self._renderer is None:
+            from .rendering import FrameRenderer
+
+            self._renderer = FrameRenderer()
+        batch = self._batch
+        frame = self._renderer.draw(batch.sim.world_positions(batch.state)[0], batch.object_position[0],
+                                    batch.sim.scenes[0].grasped_object.radius, batch.normal_force[0],
+                                    float(batch.time[0]), batch.natural_curvature[0])
+        if self.render_mode == "rgb_array":
+            return frame
+        self._show(frame)
+        return None
+
+    def _show(self, frame: np.ndarray) -> None:
+        import matplotlib.pyplot as plt
+
+        if self._window is None:
+            plt.ion()
+            figure, axes = plt.subplots(figsize=(frame.shape[1] / 100, frame.shape[0] / 100))
+            axes.set_axis_off()
+            self._window = (figure, axes.imshow(frame))
+        self._window[1].set_data(frame)
+        plt.pause(1.0 / self.metadata["render_fps"])
+
+    def close(self) -> None:
+        if self._window is not None:
+            import matplotlib.pyplot as plt
+
+            plt.close(self._window[0])
+            self._window = None
+
+
+def _single(infos: dict[str, Any]) -> dict[str, Any]:
+    """The single env's info: Python scalars, per-finger arrays."""
+    out = {}
+    for key, value in infos.items():
+        if isinstance(value, dict):
+            out[key] = {name: float(v[0]) for name, v in value.items()}
+        elif value.ndim > 1:
+            out[key] = value[0].copy()
+        elif value.dtype == bool:
+            out[key] = bool(value[0])
+        elif value.dtype.kind == "i":
+            out[key] = int(value[0])
+        else:
+            out[key] = float(value[0])
+    return out
+
+
+class SoftGripperUnderwaterVectorEnv(VectorEnv):
+    """``num_envs`` copies of :class:`SoftGripperUnderwaterEnv` stepped in one batched simulator.
+
+    Seeding, options, spaces, rewards and infos are those of the single env (infos as (num_envs,) arrays, with the
+    usual ``"_key"`` masks). Env i of ``reset(seed=s)`` is seeded with s + i, as Gymnasium's ``SyncVectorEnv``
+    seeds its envs, so the results equal those of ``num_envs`` single envs to rounding. Autoreset follows
+    Gymnasium 1.x's default, ``AutoresetMode.NEXT_STEP``: the step after an episode ends resets that env, ignores
+    its action, and returns its first observation with reward 0. The paper's scene (``scene="paper"``) is for the
+    single env only.
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": [], "render_fps": 20}
+
+    def __init__(self, num_envs: int = 1, max_episode_steps: int = DEFAULT_MAX_EPISODE_STEPS, **settings) -> None:
+        if not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= 100_000:
+            raise ValueError(f"num_envs = {num_envs!r} is outside the allowed range [1, 100000]")
+        if not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps = {max_episode_steps!r} must be a positive integer")
+        self.task = GraspTask(**settings)
+        self.num_envs = int(num_envs)
+        self.max_episode_steps = int(max_episode_steps)
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self.task.control_dt}
+        self.single_action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self._low, self._high = observation_bounds(self.task)
+        self.single_observation_space = spaces.Box(self._low, self._high, dtype=np.float32)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._batch = GraspBatch(self.task, self.num_envs)
+        self._rngs: list[np.random.Generator] = []
+        self._steps = np.zeros(self.num_envs, dtype=np.int64)
+        self._autoreset = np.zeros(self.num_envs, dtype=bool)
+
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
+        if seed is None or isinstance(seed, (int, np.integer)):
+            seeds = [None if seed is None else int(seed) + i for i in range(self.num_envs)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"reset got {len(seeds)} seeds for num_envs = {self.num_envs}")
+        options = check_options(options)
+        if options.get("scene") == "paper":
+            raise ValueError("reset option scene = 'paper' is for the single env (gym.make), not a vector")
+        if seed is not None or not self._rngs:
+            self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        self._reset_envs(np.arange(self.num_envs), options)
+        self._autoreset[:] = False
+        infos = _infos(self._batch, _zero_terms(self.num_envs), np.zeros(self.num_envs, dtype=bool))
+        return _observations(self._batch, self._low, self._high), _masked(infos)
+
+    def _reset_envs(self, indices: np.ndarray, options: dict) -> None:
+        scenes = [task_scene(self.task, self._rngs[i], options) for i in indices]
+        self._batch.reset(indices, scenes, "task")
+        self._steps[indices] = 0
+
+    def step(self, actions):
+        if self._batch.sim is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        actions = _check_actions(actions, (self.num_envs, 3))
+        active = ~self._autoreset
+        outcome = self._batch.step(actions, active)
+        self._steps[active] += 1
+        terminated = outcome.terminated.copy()
+        truncated = active & (outcome.solver_failure | (self._steps >= self.max_episode_steps))
+        reward = outcome.reward.copy()
+        terms = outcome.reward_terms
+        restarting = np.nonzero(self._autoreset)[0]
+        if len(restarting):
+            self._reset_envs(restarting, {})
+            reward[restarting] = 0.0
+            terms = {name: np.where(active, value, 0.0) for name, value in terms.items()}
+        infos = _infos(self._batch, terms, outcome.solver_failure)
+        self._autoreset = terminated | truncated
+        return (_observations(self._batch, self._low, self._high), reward, terminated, truncated, _masked(infos))
+
+
+def _masked(infos: dict[str, Any]) -> dict[str, Any]:
+    """Gymnasium's vector info layout: each key's array, and a ``"_key"`` mask of the envs that report it (all)."""
+    out: dict[str, Any] = {}
+    for key, value in infos.items():
+        if isinstance(value, dict):
+            value = _masked(value)
+            size = len(next(iter(infos[key].values())))
+        else:
+            size = len(value)
+        out[key] = value
+        out["_" + key] = np.ones(size, dtype=bool)
+    return out
+
+
+__all__ = ["SoftGripperUnderwaterEnv", "SoftGripperUnderwaterVectorEnv", "DEFAULT_MAX_EPISODE_STEPS",
+           "NATURAL_CURVATURE_LIMIT"]

@@ -1,0 +1,295 @@
+"""SoftGripperUnderwater-v0: registration, the Gymnasium and SB3 contracts, determinism, the vector env, the
+scripted baseline against the core simulator, rendering, and bad input."""
+
+import pickle
+import subprocess
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import soft_gripper_env
+from agents.scripted import PAPER_RATE, RampPolicy, ReactivePolicy
+from soft_gripper_env.env import SoftGripperUnderwaterEnv, SoftGripperUnderwaterVectorEnv, observation_slices
+from soft_gripper_env.grasp_task import GraspTask
+from soft_gripper_env.physics import PAPER_BALL, paper_scene, run_ramp
+from soft_gripper_env.physics.config import replace
+
+ENV_ID = soft_gripper_env.ENV_ID
+
+
+@pytest.fixture
+def env():
+    environment = gym.make(ENV_ID)
+    yield environment
+    environment.close()
+
+
+def rollout(env, actions, seed, options=None):
+    obs, _ = env.reset(seed=seed, options=options)
+    out = [obs]
+    rewards = []
+    for action in actions:
+        obs, reward, terminated, truncated, _ = env.step(action)
+        out.append(obs)
+        rewards.append(reward)
+        if terminated or truncated:
+            break
+    return np.array(out), np.array(rewards)
+
+
+def test_make_without_import_registers_and_sets_the_time_limit():
+    code = ("import gymnasium as gym; env = gym.make('soft_gripper_env:SoftGripperUnderwater-v0'); "
+            "print(env.spec.max_episode_steps, env.observation_space.shape)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["60", "(309,)"]
+
+
+def test_gymnasium_and_sb3_checkers_pass_without_warnings(env):
+    from gymnasium.utils.env_checker import check_env as gym_check
+    from stable_baselines3.common.env_checker import check_env as sb3_check
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gym_check(env.unwrapped)
+        sb3_check(SoftGripperUnderwaterEnv(), warn=True)
+
+
+def test_same_seed_same_rollout_and_other_seed_another(env):
+    actions = np.random.default_rng(0).uniform(-1, 1, (8, 3))
+    first, rewards = rollout(env, actions, seed=3)
+    second, rewards_again = rollout(env, actions, seed=3)
+    np.testing.assert_array_equal(first, second)
+    np.testing.assert_array_equal(rewards, rewards_again)
+    other, _ = rollout(env, actions, seed=4)
+    assert np.abs(other[0] - first[0]).max() > 1e-4  # another sphere
+
+
+def test_pickled_env_continues_identically(env):
+    env.reset(seed=5)
+    for _ in range(3):
+        env.step(np.array([-0.5, -0.5, -0.5]))
+    copy = pickle.loads(pickle.dumps(env))
+    for _ in range(3):
+        a = env.step(np.array([-0.2, 0.1, -0.4]))
+        b = copy.step(np.array([-0.2, 0.1, -0.4]))
+        np.testing.assert_array_equal(a[0], b[0])
+        assert a[1] == b[1]
+
+
+def test_reward_terms_sum_to_the_reward_and_info_types(env):
+    obs, info = env.reset(seed=1)
+    assert set(info["reward_terms"]) == {"contact", "hold", "rest", "overload", "effort"}
+    policy = RampPolicy(rate=-0.5)
+    touched = False
+    for _ in range(20):
+        obs, reward, terminated, truncated, info = env.step(policy(obs))
+        assert isinstance(reward, float) and isinstance(terminated, bool) and isinstance(truncated, bool)
+        assert reward == pytest.approx(sum(info["reward_terms"].values()), abs=1e-12)
+        assert info["reward_terms"]["effort"] == pytest.approx(-0.05 * 1.0)
+        touched |= info["reward_terms"]["contact"] > 0
+        assert isinstance(info["is_success"], bool) and not info["solver_failure"]
+    assert touched  # the contact term was exercised, not only zeros
+
+
+@pytest.mark.slow
+def test_thousand_random_steps_stay_finite_and_inside_the_space():
+    env = gym.make(ENV_ID, max_episode_steps=25)
+    env.action_space.seed(0)
+    obs, _ = env.reset(seed=0)
+    for _ in range(1000):
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample() * 1.5)  # beyond ±1: clipped
+        assert obs.dtype == np.float32 and np.isfinite(obs).all() and env.observation_space.contains(obs)
+        assert np.isfinite(reward)
+        if terminated or truncated:
+            obs, _ = env.reset()
+
+
+def test_paper_scene_with_the_scripted_ramp_reproduces_the_core_simulator():
+    """The env rollout of the paper's exact scene (fixed ball, Stokes drag, no buoyancy) with the constant rate
+    −0.15 1/s equals the core simulator's direct run of that scene to 1e-9 m at every control step."""
+    env = gym.make(ENV_ID)
+    obs, _ = env.reset(seed=0, options={"scene": "paper"})
+    policy = RampPolicy()
+    layout = observation_slices(GraspTask())
+    reference = run_ramp(replace(paper_scene(grasped_object=PAPER_BALL), natural_curvature_rate=PAPER_RATE))
+    positions = [obs[layout["node_positions"]]]
+    for _ in range(20):  # 1 s
+        obs, *_ = env.step(policy(obs))
+        positions.append(obs[layout["node_positions"]])
+    env_planar = np.array(positions, dtype=np.float64).reshape(21, 3, 20, 2)
+    ref = reference.positions[::5, 0]  # (21, F, N, 3) world, every 0.05 s
+    directions = np.array([[np.cos(a), np.sin(a), 0.0] for a in (0.0, 2 * np.pi / 3, 4 * np.pi / 3)])
+    ref_planar = np.stack([np.einsum("tfnk,fk->tfn", ref, directions), ref[..., 2]], axis=-1)
+    assert np.abs(ref_planar).max() > 0.1
+    # the observation is float32: compare at its resolution, and the env's float64 state at 1e-9 m
+    np.testing.assert_allclose(env_planar, ref_planar, atol=2e-8, rtol=0)
+    state = env.unwrapped._batch.state
+    world = env.unwrapped._batch.sim.world_positions(state)[0]
+    np.testing.assert_allclose(world, reference.positions[-1, 0], atol=1e-9, rtol=0)
+    assert obs[layout["normal_forces"]].sum() > 0.1  # it touched the ball
+
+
+def test_vector_env_matches_single_envs_including_autoreset():
+    """make_vec (one batched simulator) against Gymnasium's SyncVectorEnv of single envs, same seeds and actions,
+    with episodes short enough that every env autoresets twice."""
+    n, steps = 3, 10
+    vector = gym.make_vec(ENV_ID, num_envs=n, max_episode_steps=4)
+    assert isinstance(vector.unwrapped, SoftGripperUnderwaterVectorEnv)
+    reference = gym.vector.SyncVectorEnv([lambda: gym.make(ENV_ID, max_episode_steps=4) for _ in range(n)])
+    actions = np.random.default_rng(1).uniform(-1, 1, (steps, n, 3))
+    obs, info = vector.reset(seed=11)
+    ref_obs, ref_info = reference.reset(seed=11)
+    np.testing.assert_allclose(obs, ref_obs, atol=1e-9, rtol=0)
+    for k in range(steps):
+        obs, reward, terminated, truncated, info = vector.step(actions[k])
+        ref_obs, ref_reward, ref_terminated, ref_truncated, ref_info = reference.step(actions[k])
+        np.testing.assert_allclose(obs, ref_obs, atol=1e-6, rtol=0)
+        np.testing.assert_allclose(reward, ref_reward, atol=1e-9, rtol=0)
+        np.testing.assert_array_equal(terminated, ref_terminated)
+        np.testing.assert_array_equal(truncated, ref_truncated)
+        np.testing.assert_array_equal(info["is_success"], ref_info["is_success"])
+        np.testing.assert_allclose(info["reward_terms"]["contact"], ref_info["reward_terms"]["contact"], atol=1e-9)
+    assert truncated.any() or terminated.any() or k > 4
+
+
+def test_solver_failure_truncates_and_keeps_the_last_good_state(env, monkeypatch):
+    obs, _ = env.reset(seed=2)
+    batch = env.unwrapped._batch
+    real_step = batch.sim.step
+
+    def failing(state, kbar):
+        result = real_step(state, kbar)
+        return replace(result, converged=np.zeros_like(result.converged),
+                       state=replace(result.state, q=np.full_like(result.state.q, np.nan)))
+
+    monkeypatch.setattr(batch.sim, "step", failing)
+    after, reward, terminated, truncated, info = env.step(np.zeros(3))
+    assert truncated and not terminated and info["solver_failure"]
+    np.testing.assert_array_equal(after, obs)
+    assert np.isfinite(reward)
+
+
+def test_rgb_frame_and_recorded_video(tmp_path):
+    env = gym.make(ENV_ID, render_mode="rgb_array")
+    env.reset(seed=0)
+    for _ in range(12):
+        env.step(np.full(3, -1.0))
+    frame = env.render()
+    assert frame.shape == (480, 480, 3) and frame.dtype == np.uint8
+    assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 50  # a picture, not a blank canvas
+    assert env.metadata["render_fps"] == pytest.approx(20.0)
+    recorded = gym.wrappers.RecordVideo(gym.make(ENV_ID, render_mode="rgb_array", max_episode_steps=5),
+                                        str(tmp_path / "videos"), disable_logger=True)
+    recorded.reset(seed=0)
+    done = False
+    while not done:
+        _, _, terminated, truncated, _ = recorded.step(np.full(3, -0.3))
+        done = terminated or truncated
+    recorded.close()
+    videos = list((tmp_path / "videos").glob("*.mp4"))
+    assert videos and videos[0].stat().st_size > 1000
+
+
+@pytest.mark.parametrize("action, pattern", [
+    (np.array([np.nan, 0.0, 0.0]), r"must be finite"),
+    (np.array([0.0, np.inf, 0.0]), r"must be finite"),
+    (np.zeros(2), r"shape \(2,\); expected \(3,\)"),
+    (np.zeros((1, 3)), r"shape \(1, 3\); expected \(3,\)"),
+    ("close", r"not numeric"),
+])
+def test_bad_actions_raise(env, action, pattern):
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=pattern):
+        env.step(action)
+
+
+@pytest.mark.parametrize("options, pattern", [
+    ({"radius": 0.05}, r"reset options \['radius'\] are unknown"),
+    ({"object_radius": 0.5}, r"object_radius = 0\.5 m is outside the allowed range \[0\.01, 0\.09\)"),
+    ({"object_density": float("nan")}, r"object_density = nan"),
+    ({"object_offset": (0.0, 0.0)}, r"object_offset = \(0\.0, 0\.0\) must have 3 components"),
+    ({"current_velocity": (0.0, 2.0, 0.0)}, r"current_velocity = 2\.0 m/s is outside"),
+    ({"scene": "lake"}, r"scene = 'lake' is not one of 'task', 'paper'"),
+    ("paper", r"reset options must be a dict or None"),
+])
+def test_bad_reset_options_raise(env, options, pattern):
+    with pytest.raises(ValueError, match=pattern):
+        env.reset(seed=0, options=options)
+
+
+@pytest.mark.parametrize("settings_, pattern", [
+    ({"model": "2d"}, r"GraspTask\.model = '2d' is not one of 'planar', '3d'"),
+    ({"control_dt": 0.025}, r"control_dt = 0\.025 s must be a whole multiple of physics_dt"),
+    ({"physics_dt": 0.0}, r"physics_dt = 0\.0 s is outside the allowed range"),
+    ({"curvature_range": (-3.0, 0.0)}, r"curvature_range = -3\.0 \(dimensionless\) is outside"),
+    ({"curvature_range": (-0.1, -0.05)}, r"must contain 0"),
+    ({"object_radius": (0.06, 0.04)}, r"object_radius = \(0\.06, 0\.04\) must be a \(low, high\) pair"),
+    ({"render_mode": "ascii"}, r"render_mode = 'ascii' is not one of"),
+    ({"fragile_force": -1.0}, r"fragile_force = -1\.0 N is outside"),
+])
+def test_bad_settings_raise(settings_, pattern):
+    with pytest.raises(ValueError, match=pattern):
+        SoftGripperUnderwaterEnv(**settings_)
+
+
+def test_vector_env_bad_input_and_step_before_reset():
+    vector = SoftGripperUnderwaterVectorEnv(num_envs=2)
+    with pytest.raises(gym.error.ResetNeeded):
+        vector.step(np.zeros((2, 3)))
+    vector.reset(seed=0)
+    with pytest.raises(ValueError, match=r"shape \(3,\); expected \(2, 3\)"):
+        vector.step(np.zeros(3))
+    with pytest.raises(ValueError, match=r"scene = 'paper' is for the single env"):
+        vector.reset(options={"scene": "paper"})
+    with pytest.raises(ValueError, match=r"num_envs = 0 is outside the allowed range"):
+        SoftGripperUnderwaterVectorEnv(num_envs=0)
+    with pytest.raises(gym.error.ResetNeeded):
+        SoftGripperUnderwaterEnv().step(np.zeros(3))
+
+
+def test_reset_options_fix_the_scene(env):
+    options = {"object_radius": 0.045, "object_density": 1003.0, "object_offset": (0.01, -0.01, 0.0),
+               "current_velocity": (0.01, 0.0, 0.0), "current_oscillation": (0.0, 0.0, 0.0)}
+    layout = observation_slices(GraspTask())
+    for seed in (0, 1):
+        obs, _ = env.reset(seed=seed, options=options)
+        np.testing.assert_allclose(obs[layout["object_position"]], [0.01, -0.01, -0.1], atol=1e-7)
+        scene = env.unwrapped._batch.sim.scenes[0]
+        assert scene.grasped_object.radius == 0.045 and scene.grasped_object.density == 1003.0
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(actions=st.lists(st.lists(st.floats(-5.0, 5.0, allow_nan=False), min_size=3, max_size=3), min_size=1,
+                        max_size=4),
+       radius=st.floats(0.01, 0.0899), density=st.floats(500.0, 2999.0),
+       offset=st.lists(st.floats(-0.05, 0.0499), min_size=3, max_size=3),
+       current=st.lists(st.floats(-0.5, 0.4999), min_size=3, max_size=3))
+def test_fuzzed_actions_and_options_give_valid_observations(env, actions, radius, density, offset, current):
+    obs, _ = env.reset(seed=0, options={"object_radius": radius, "object_density": density, "object_offset": offset,
+                                        "current_velocity": current})
+    assert env.observation_space.contains(obs)
+    for action in actions:
+        obs, reward, terminated, truncated, info = env.step(np.array(action))
+        assert env.observation_space.contains(obs) and np.isfinite(reward)
+        if terminated or truncated:
+            break
+
+
+def test_reactive_policy_acts_per_observation():
+    task = GraspTask()
+    policy = ReactivePolicy(task)
+    layout = observation_slices(task)
+    obs = np.zeros(309, dtype=np.float32)
+    assert np.all(policy(obs) == -1.0)  # nothing touches: close at full rate
+    forces = np.zeros((3, 20))
+    forces[:, 10] = 1.0  # all press 1 N, above the 0.2 N target: open
+    obs[layout["normal_forces"]] = forces.ravel()
+    assert np.all(policy(obs) > 0)
+    with pytest.raises(ValueError, match=r"rate = -2\.0 1/s is outside"):
+        RampPolicy(rate=-2.0)
