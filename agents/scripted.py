@@ -29,23 +29,27 @@ class RampPolicy:
 
 
 class ReactivePolicy:
-    """Closes all fingers together at full rate until the first one touches, then at a third of it until all three
-    press, and from then holds their mean normal force near ``target_force`` [N] with a proportional law. The
-    fingers move as one, so the object is caged rather than pushed from one side."""
+    """The paper's ramp with contact-force feedback. All fingers close together at the paper's rate until every
+    finger presses at least ``touch_force`` [N] (the object is caged), or one presses ``force_band[0]``; they
+    hold κ̄ from there, and open at ``release`` (an action) while a finger presses more than ``force_band[1]``.
+    So a delicate object is held near the task's fragility threshold, where the ramp keeps squeezing."""
 
-    def __init__(self, task: GraspTask | None = None, target_force: float = 0.2, gain: float = 0.5) -> None:
+    def __init__(self, task: GraspTask | None = None, touch_force: float = 0.05,
+                 force_band: tuple[float, float] = (0.45, 0.6), release: float = 0.3) -> None:
         self.task = task or GraspTask()
-        if not 0.0 < target_force <= 100.0:
-            raise ValueError(f"target_force = {target_force!r} N is outside the allowed range (0, 100] N")
-        self.target_force = target_force
-        self.gain = gain
+        low, high = force_band
+        if not 0.0 < low < high <= 100.0:
+            raise ValueError(f"force_band = {force_band!r} N must satisfy 0 < low < high ≤ 100 N")
+        if not 0.0 < touch_force <= low:
+            raise ValueError(f"touch_force = {touch_force!r} N is outside the allowed range (0, {low:g}] N")
+        self.touch_force, self.force_band, self.release = touch_force, (float(low), float(high)), release
         self._forces = observation_slices(self.task)["normal_forces"]
+        self._paper_action = PAPER_RATE / self.task.max_curvature_rate
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         observation = np.asarray(observation)
         force = observation[..., self._forces].reshape(observation.shape[:-1] + (3, -1)).sum(axis=-1)
-        touching = force >= self.task.contact_force
-        error = (self.target_force - force.mean(axis=-1)) / self.target_force
-        rate = np.where(touching.all(axis=-1), np.clip(-self.gain * error, -1.0, 1.0),
-                        np.where(touching.any(axis=-1), -1.0 / 3.0, -1.0))
+        closing = (force.min(axis=-1) < self.touch_force) & (force.max(axis=-1) < self.force_band[0])
+        rate = np.where(closing, self._paper_action, np.where(force.max(axis=-1) > self.force_band[1],
+                                                              self.release, 0.0))
         return np.repeat(np.asarray(rate, dtype=np.float32)[..., None], 3, axis=-1)

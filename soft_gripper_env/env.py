@@ -116,7 +116,8 @@ class SoftGripperUnderwaterEnv(gym.Env):
     node positions   F·N·D       every node of every finger                            m       ±0.5
     node velocities  F·N·D       their velocities                                      m/s     ±10
     κ̄               F           present natural curvature per finger                  1       curvature_range
-    normal forces    F·N         compressive reaction of the object on each node      N       0 … 100
+    normal forces    F·N         compressive reaction of the object on each node,     N       0 … 100
+                                 mean over the last control interval
     object position  3           sphere centre relative to the palm centre (world)     m       ±1
     object velocity  3           sphere velocity relative to the palm (world)          m/s     ±10
     ===============  ==========  ====================================================  ======  ==============
@@ -132,7 +133,7 @@ class SoftGripperUnderwaterEnv(gym.Env):
     contact    0.25 × fraction of fingers in compressive contact (Σ normal force ≥ 0.01 N)   [0, 0.25]
     hold       1.0 × (1 − tanh(d / 0.03 m)), d the distance to the grasp point (0, 0, −0.1)  [0, 1]
                m; only while all three fingers touch
-    rest       0.5 × (1 − tanh(|v| / 0.02 m/s)); only while all three fingers touch          [0, 0.5]
+    rest       0.5 × (1 − tanh(|v| / 0.05 m/s)); only while all three fingers touch          [0, 0.5]
     overload   −1.0 × tanh(excess / 0.5 N), excess of the largest finger force over the     [−1, 0]
                fragility threshold 0.5 N
     effort     −0.05 × mean(action²)                                                        [−0.05, 0]
@@ -147,7 +148,7 @@ class SoftGripperUnderwaterEnv(gym.Env):
     validation. An unknown key or a value out of its range raises ``ValueError``.
 
     * ``info["is_success"]``: the object has been held — all three fingers in compressive contact, its centre within
-      0.03 m of the grasp point and slower than 0.02 m/s — for the last 1 s without a break.
+      0.03 m of the grasp point and slower than 0.05 m/s — for the last 1 s without a break.
     * ``terminated``: the object is lost, more than 0.15 m from the grasp point.
     * ``truncated``: the time limit (``max_episode_steps``, 60 steps = 3 s when made by ``gym.make``), or a physics
       step whose Newton solve failed even after halving (``info["solver_failure"] = True``; the state is the last
@@ -299,6 +300,15 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
         scenes = [task_scene(self.task, self._rngs[i], options) for i in indices]
         self._batch.reset(indices, scenes, "task")
         self._steps[indices] = 0
+
+    def reset_done(self) -> np.ndarray:
+        """Resets now every env whose episode ended at the last step, instead of at the next one, and returns the
+        observations of all envs: the same-step autoreset that Stable-Baselines3's VecEnv expects."""
+        done = np.nonzero(self._autoreset)[0]
+        if len(done):
+            self._reset_envs(done, {})
+            self._autoreset[done] = False
+        return _observations(self._batch, self._low, self._high)
 
     def step(self, actions):
         if self._batch.sim is None:

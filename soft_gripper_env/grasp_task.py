@@ -90,7 +90,7 @@ class GraspTask:
     """Largest force one finger may press on the object without harming it [N]."""
     hold_distance: float = 0.03
     """Held: the object's centre within this of the grasp point [m]."""
-    rest_speed: float = 0.02
+    rest_speed: float = 0.05
     """Held: the object slower than this relative to the palm [m/s]."""
     success_duration: float = 1.0
     """Success: held continuously for this long [s]."""
@@ -244,7 +244,8 @@ class GraspBatch:
         self.natural_curvature = np.zeros((B, F))
         """κ̄ of every finger (dimensionless)."""
         self.normal_force = np.zeros((B, F, paper_finger().n_nodes))
-        """Normal reaction on every node from the last physics step [N]."""
+        """Compressive reaction of the object on every node, averaged over the last control interval [N]: stick
+        contact makes the reaction of a single physics step impulsive, its mean over the interval is not."""
         self.hold_time = np.zeros(B)
         """How long each object has been held without a break [s]."""
         self.time = np.zeros(B)
@@ -290,6 +291,7 @@ class GraspBatch:
         failed = np.zeros(self.batch_size, dtype=bool)
         iterations = np.zeros(self.batch_size, dtype=np.int64)
         running = active.copy()
+        impulse = np.zeros_like(self.normal_force)  # Σ normal reaction · Δt over the interval [N·s]
         for _ in range(task.substeps):
             if not running.any():
                 break
@@ -304,13 +306,14 @@ class GraspBatch:
                 self.state = replace(put_grippers(self.state, index, take_grippers(result.state, index)),
                                      time=result.state.time)
             if result.contact is not None:
-                self.normal_force[keep] = np.maximum(result.contact.normal_reaction[keep], 0.0)
+                impulse[keep] += np.maximum(result.contact.normal_reaction[keep], 0.0) * task.physics_dt
             iterations[keep] += result.newton_iterations[keep]
             self.natural_curvature[keep] = np.clip(self.natural_curvature[keep] + rate[keep] * task.physics_dt,
                                                    low, high)
             self.time[keep] += task.physics_dt
             running = keep
         self.newton_iterations = np.where(active, iterations, self.newton_iterations)
+        self.normal_force[active] = impulse[active] / task.control_dt
 
         terms, held = self._reward_terms(action)
         self.hold_time = np.where(active, np.where(held, self.hold_time + task.control_dt, 0.0), self.hold_time)

@@ -133,12 +133,22 @@ PAPER_BALL = Sphere(radius=0.065, center=(0.0, 0.0, -0.09))
 class ContactSettings:
     max_corrector_iterations: int = 10
     """Re-solves of one step allowed for new contacts and releases."""
+    palm_stiffness: float = 1000.0
+    """The palm, a disc of radius ``palm_radius`` about the z axis in the plane z = 0 of the finger bases, pushes
+    a free object that overlaps it back down with this stiffness [N/m] (1 mm of overlap per newton), critically
+    damped for the object's mass; 0 turns it off. Contact is node-based, so the palm, like the fingers, is its
+    centre plane. Without it an object pushed up by the fingers would pass the clamped nodes and be crushed
+    against the finger roots."""
+    palm_radius: float = 0.03
+    """Radius of the palm disc [m]: the finger roots (the two clamped nodes reach 0.021 m) and a little more."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_corrector_iterations, (int, np.integer)) or \
                 not 0 <= self.max_corrector_iterations <= 100:
             raise ValueError(f"ContactSettings.max_corrector_iterations = {self.max_corrector_iterations!r} is "
                              f"outside the allowed range [0, 100] (integer count)")
+        check_range("ContactSettings", "palm_stiffness", self.palm_stiffness, "N/m", 0.0, 1e9, low_inclusive=True)
+        check_range("ContactSettings", "palm_radius", self.palm_radius, "m", 0.0, 10.0, low_inclusive=True)
 
 
 @dataclass(frozen=True, eq=False)
@@ -208,7 +218,7 @@ def within_reach(starts: np.ndarray, ends: np.ndarray, radii: np.ndarray, length
     return (np.linalg.norm(palm, axis=1) < length + radii) & (radii > 0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _distance_to_segment(point, start, end, nearest):
     """Distance from ``point`` to the segment start–end; writes the segment's nearest point into ``nearest``."""
     dim = point.size
@@ -225,7 +235,7 @@ def _distance_to_segment(point, start, end, nearest):
     return math.sqrt(distance2)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def find_penetrations(positions, old_positions, shifts, starts, ends, radii, held, searched, first_free_node,
                       tolerance, new_hold, hold_at):
     """Marks in ``new_hold`` (R, N) every free node of a searched rod that lies inside its object (the points within

@@ -163,7 +163,7 @@ def _add_linear_damping(disc: Discretization, coefficient: np.ndarray, velocitie
     linear_damping(coefficient, velocities, velocity_derivative, disc.stride, force, system_band)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def linear_damping(coefficient, velocities, velocity_derivative, stride, force, band):
     """Adds −c_i·v_i to ``force`` (R, N, D) and c_i·∂v/∂q to the position diagonal of ``band`` (R, n, kd+1)."""
     n_rods, n_nodes, dim = velocities.shape

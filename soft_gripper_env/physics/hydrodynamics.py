@@ -177,7 +177,7 @@ class AddedMass(ForceModel):
                    disc.stride, force, system_band)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _add_edge_block(band_r, stride, i, dim, block, scale):
     """Add scale·[[B, B], [B, B]] over the position DOFs of nodes i and i+1 to one rod's band (lower part)."""
     kd = band_r.shape[1] - 1
@@ -194,7 +194,7 @@ def _add_edge_block(band_r, stride, i, dim, block, scale):
             band_r[row_j, kd - row_j + col_i] += value
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _edge_tangent(positions, r, e, t):
     """Writes the unit tangent of edge e of rod r into ``t`` (D,)."""
     length2 = 0.0
@@ -206,7 +206,7 @@ def _edge_tangent(positions, r, e, t):
         t[k] *= inverse_length
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def morison_drag(positions, velocities, current, normal, tangential, velocity_derivative, stride, force, band):
     """Morison drag of every edge: adds the force to ``force`` (R, N, D) and its velocity Jacobian to ``band``.
 
@@ -247,7 +247,7 @@ def morison_drag(positions, velocities, current, normal, tangential, velocity_de
             _add_edge_block(band[r], stride, e, dim, block, 0.25 * velocity_derivative)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def added_mass(start_positions, accelerations, edge_mass, acceleration_derivative, stride, force, band):
     """Added-mass force −Σ ½·m_a·(I − t tᵀ)·a_node of every edge, with tangents at the start of the step; adds the
     force to ``force`` (R, N, D) and ½·m_a·(I − t tᵀ)·∂a/∂q on the node blocks of ``band``."""

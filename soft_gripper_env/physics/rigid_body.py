@@ -21,12 +21,14 @@ free DOFs are eliminated rod by rod (one banded factorisation, seven right-hand 
 for the body per gripper (a Schur complement). A staggered scheme, which would move the body with last iteration's
 reactions, is unstable for a body as light as the water it displaces; this one is not.
 
-External loads come from the scene's own force models: gravity from :class:`~.forces.Gravity`, buoyancy from
-:class:`~.forces.Buoyancy`, and when :class:`~.hydrodynamics.MorisonDrag` is present quadratic drag on the velocity
-relative to the current: ½·ρ_w·C_d·π·r²·|w|·w for a sphere (C_d = 0.47, Re ≈ 10³–10⁵) or a capsule's two end caps,
-plus ½·ρ_w·C_n·D·h·|w_n|·w_n across a capsule's cylinder. With :class:`~.hydrodynamics.AddedMass`, added mass
-C_a = 0.5 of a sphere's volume, and C_a·ρ_w·π·r²·h across a capsule's cylinder. The water's torque on a turning
-body is neglected.
+The palm, a disc in the plane z = 0, pushes back on a body that overlaps it, with a stiffness and critical damping
+(:attr:`~.contact.ContactSettings.palm_stiffness`; the overlap's dependence on the horizontal position and the
+orientation is left out of the Newton matrix). External loads come from the scene's own force models: gravity from
+:class:`~.forces.Gravity`, buoyancy from :class:`~.forces.Buoyancy`, and when :class:`~.hydrodynamics.MorisonDrag`
+is present quadratic drag on the velocity relative to the current: ½·ρ_w·C_d·π·r²·|w|·w for a sphere (C_d = 0.47,
+Re ≈ 10³–10⁵) or a capsule's two end caps, plus ½·ρ_w·C_n·D·h·|w_n|·w_n across a capsule's cylinder. With
+:class:`~.hydrodynamics.AddedMass`, added mass C_a = 0.5 of a sphere's volume, and C_a·ρ_w·π·r²·h across a
+capsule's cylinder. The water's torque on a turning body is neglected.
 """
 
 from __future__ import annotations
@@ -50,7 +52,11 @@ class BodyModel:
     """Mass properties and external loads of the free spheres or capsules of a batch of B grippers, one each, as
     arrays with a leading batch axis (body frame = world at t = 0). :meth:`load` sets one gripper's body."""
 
-    def __init__(self, forces, batch_size: int) -> None:
+    def __init__(self, forces, batch_size: int, palm_stiffness: float = 0.0, palm_radius: float = 0.0) -> None:
+        self.palm_stiffness = palm_stiffness
+        """k of the palm disc in the plane z = 0 [N/m] (:class:`~.contact.ContactSettings`)."""
+        self.palm_radius = palm_radius
+        """Its radius [m]."""
         self._gravity = sum(f.acceleration for f in forces if isinstance(f, Gravity))
         self._buoyancy = sum(f.fluid_density * f.acceleration for f in forces if isinstance(f, Buoyancy))
         added = [f for f in forces if isinstance(f, AddedMass)]
@@ -127,6 +133,18 @@ class BodyModel:
             safe = np.where(speed > 0, speed, 1.0)
             jacobian = jacobian + (coefficient / dt)[:, None, None] * (
                 speed[..., None] * projector + part[:, :, None] * part[:, None, :] / safe[..., None])
+        if self.palm_stiffness:
+            # the palm: k·overlap + critical damping 2·√(k·M)·v_z where the body rises above the disc; the body's
+            # highest end sphere counts
+            ends = [c + np.einsum("bij,bj->bi", orientation, end) for end in self.segment]
+            end = np.where((ends[0][:, 2] >= ends[1][:, 2])[:, None], ends[0], ends[1])
+            outside = np.maximum(np.hypot(end[:, 0], end[:, 1]) - self.palm_radius, 0.0)  # past the disc's rim
+            reach = np.sqrt(np.maximum(self.radius**2 - outside**2, 0.0))
+            top = end[:, 2] + reach
+            touching = (top > 0.0) & (outside < self.radius)
+            damping = 2.0 * np.sqrt(self.palm_stiffness * mass[:, 2, 2])
+            force[:, 2] -= touching * (self.palm_stiffness * top + damping * u[:, 2])
+            jacobian[:, 2, 2] += touching * (self.palm_stiffness + damping / dt)
         inertia_new = orientation @ self.inertia @ orientation.transpose(0, 2, 1)
         inertia_old = orientation_old @ self.inertia @ orientation_old.transpose(0, 2, 1)
         momentum_change = (np.einsum("bij,bj->bi", inertia_new, theta / dt)
@@ -149,7 +167,7 @@ def rotation_exp(theta: np.ndarray) -> np.ndarray:
     return np.eye(3) + a[:, None, None] * k + b[:, None, None] * (k @ k)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def eliminate_rods(band, residual, coupling, free, active, x0, x_coupling, body_block, body_rhs):
     """Eliminates each active rod's free DOFs from the coupled Newton system.
 

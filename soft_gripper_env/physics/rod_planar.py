@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _stretch(q, r, i, rest_length, stretch_stiffness, force, band, accumulate_hessian):
     """Stretch energy of edge i of rod r; adds force and Hessian (DOFs of nodes i, i+1)."""
     ex = q[r, i + 1, 0] - q[r, i, 0]
@@ -68,7 +68,7 @@ def _stretch(q, r, i, rest_length, stretch_stiffness, force, band, accumulate_he
     return energy
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accumulate_hessian):
     """Bending energy at interior node i of rod r; adds force and Hessian (DOFs of nodes i−1, i, i+1)."""
     ex = q[r, i, 0] - q[r, i - 1, 0]
@@ -130,7 +130,7 @@ def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accum
     return energy
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def planar_elastic(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_length, natural_curvature,
                    force, band, accumulate_hessian):
     """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 2) and ∇²E to ``band`` (R, 2N, 6).

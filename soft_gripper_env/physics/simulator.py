@@ -139,7 +139,7 @@ class Simulator:
         self._body = None
         obj = scene.grasped_object
         if obj is not None and obj.free:
-            self._body = BodyModel(scene.forces, B)
+            self._body = BodyModel(scene.forces, B, scene.contact.palm_stiffness, scene.contact.palm_radius)
             directions = self.disc.finger_directions
             if scene.model == "3d":
                 projection = np.broadcast_to(np.eye(3), (len(directions), 3, 3))
@@ -481,18 +481,31 @@ class Simulator:
         offset in the body's frame, and adhesive holds are released, until nothing changes."""
         disc = self.disc
         R, N, D = self.n_rods, disc.n_nodes, disc.dim
+        B, F = self.batch_size, self.n_fingers
         held = state.held.reshape(R, N).copy()
         offsets = state.hold_offset.reshape(R, N, 3).copy()
         body_old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
+        c_start, theta_start = body_old[0] + dt * body_old[1], dt * body_old[3]
+        c, theta = c_start.copy(), theta_start.copy()
+        q = q_start.copy()
         corrector = np.zeros(R, dtype=np.int64)
+        converged = np.zeros(R, dtype=bool)
+        iterations = np.zeros(R, dtype=np.int64)
+        ratio = np.full(R, np.inf)
+        residual = np.zeros((R, disc.n_dofs))
+        grippers = np.ones(B, dtype=bool)  # solved again: all at first, then those whose contacts changed
         for k in range(self.scene.contact.max_corrector_iterations + 1):
-            q = q_start.copy()
-            converged, iterations, ratio, residual, body = self._newton_with_body(
-                q, q_old, q_pred, frames_old, kbar, state.time, dt, held, offsets, body_old)
-            position, orientation = body[0], body[2]
+            rods = np.repeat(grippers, F)
+            q[rods] = q_start[rods]
+            c[grippers], theta[grippers] = c_start[grippers], theta_start[grippers]
+            solved = self._newton_with_body(q, q_old, q_pred, frames_old, kbar, state.time, dt, held, offsets,
+                                            body_old, c, theta, grippers)
+            for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
+                total[rods] = part[rods]
+            position, orientation = c, rotation_exp(theta) @ body_old[2]
             starts, ends, radii = self._body_in_rod_frames(position, orientation)
             hold_at = np.zeros((R, N, D))
-            shift = np.einsum("rdj,rj->rd", self._projection, np.repeat(position - body_old[0], self.n_fingers, axis=0))
+            shift = np.einsum("rdj,rj->rd", self._projection, np.repeat(position - body_old[0], F, axis=0))
             searched = within_reach(starts, ends, radii, self.scene.gripper.finger.length)
             adhesive, new_hold, changed = self._contact_changes(q, q_old, residual, held, starts, ends, radii,
                                                                 searched, shift, hold_at)
@@ -500,14 +513,15 @@ class Simulator:
                 break
             # the offset of a new hold, in the body's frame at the end of this solve
             world = np.einsum("rdj,rnd->rnj", self._projection, hold_at)  # rod coordinates back to world
-            rod_orientation = np.repeat(orientation, self.n_fingers, axis=0)
-            rod_position = np.repeat(position, self.n_fingers, axis=0)
+            rod_orientation = np.repeat(orientation, F, axis=0)
+            rod_position = np.repeat(position, F, axis=0)
             new_offsets = np.einsum("rji,rnj->rni", rod_orientation, world - rod_position[:, None, :])
             offsets[new_hold] = new_offsets[new_hold]
             held = (held & ~adhesive) | new_hold
             corrector[changed] += 1
+            grippers = changed.reshape(B, F).any(axis=1)
         return (q, held, changed, corrector, converged, iterations, ratio, residual,
-                (offsets, position, body[1], orientation, body[3]))
+                (offsets, position, (position - body_old[0]) / dt, orientation, theta / dt))
 
     def _body_basis(self, held: np.ndarray) -> np.ndarray:
         """Basis (B, 6, 6) of the motions a free body may make, padded with zero columns. In 3-D, any. With planar
@@ -516,37 +530,36 @@ class Simulator:
         B, F = self.batch_size, self.n_fingers
         basis = np.zeros((B, 6, 6))
         basis[:, :3, :3] = np.eye(3)
-        touching = held.reshape(B, F, -1).any(axis=2)
         if self.disc.dim == 3:
             basis[:, 3:, 3:] = np.eye(3)
             return basis
+        touching = held.reshape(B, F, -1).any(axis=2)
         directions = self.disc.finger_directions
         normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(F)], axis=1)
-        for b in range(B):
-            planes = normals[touching[b]]
-            if len(planes) == 0:
-                basis[b, 3:, 3:] = np.eye(3)
-            elif np.allclose(np.abs(planes @ planes[0]), 1.0):
-                basis[b, 3:, 3] = planes[0]
+        first = normals[np.argmax(touching, axis=1)]  # (B, 3): a touching finger's plane normal
+        parallel = np.all(~touching | np.isclose(np.abs(first @ normals.T), 1.0), axis=1)
+        free = ~touching.any(axis=1)
+        basis[free, 3:, 3:] = np.eye(3)
+        one_axis = parallel & ~free
+        basis[one_axis, 3:, 3] = first[one_axis]
         return basis
 
-    def _newton_with_body(self, q, q_old, q_pred, frames_old, kbar, time, dt, held, offsets, body_old):
-        """Newton's method on the rods and a free sphere together (see :mod:`.rigid_body`); ``q`` (R, N, S) holds
-        the start and receives the solution. Returns per-rod converged, iterations and residual ratio (R,), the
-        residual M·(q − q_pred)/Δt² − f (R, n) (the reactions, on held DOFs) and the body's new
-        (position, velocity, orientation, angular velocity)."""
+    def _newton_with_body(self, q, q_old, q_pred, frames_old, kbar, time, dt, held, offsets, body_old, c, theta,
+                          grippers):
+        """Newton's method on the rods and a free sphere together (see :mod:`.rigid_body`), for the grippers where
+        ``grippers`` (B,) is True. ``q`` (R, N, S), the body's centre ``c`` (B, 3) and its rotation over the step
+        ``theta`` (B, 3) hold the start and receive the solution. Returns per-rod converged, iterations and residual
+        ratio (R,), and the residual M·(q − q_pred)/Δt² − f (R, n) (the reactions, on held DOFs)."""
         disc = self.disc
         R, N, S, D, n = self.n_rods, disc.n_nodes, disc.stride, disc.dim, disc.n_dofs
         B, F = self.batch_size, self.n_fingers
         c_old, u_old, orientation_old, w_old = body_old
-        c = c_old + dt * u_old
-        theta = dt * w_old
         mass_term = disc.dof_mass / dt**2
         tolerance_inverse = self._newton_tolerance_inverse(dt)
         free = self._free_mask(held)
         projection = self._projection
         kd = disc.band_width
-        active = np.ones(B, dtype=bool)
+        active = grippers.copy()
         converged = np.zeros(B, dtype=bool)
         iterations = np.zeros(B, dtype=np.int64)
         ratio = np.full(B, np.inf)
@@ -607,9 +620,7 @@ class Simulator:
             c[active] += step[active, :3]
             theta[active] += step[active, 3:]
             iterations[active] += 1
-        orientation = rotation_exp(theta) @ orientation_old
-        return (np.repeat(converged, F), np.repeat(iterations, F), np.repeat(ratio, F), residual,
-                (c, (c - c_old) / dt, orientation, theta / dt))
+        return np.repeat(converged, F), np.repeat(iterations, F), np.repeat(ratio, F), residual
 
     def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
         disc = self.disc

@@ -285,11 +285,23 @@ def test_reactive_policy_acts_per_observation():
     task = GraspTask()
     policy = ReactivePolicy(task)
     layout = observation_slices(task)
-    obs = np.zeros(309, dtype=np.float32)
-    assert np.all(policy(obs) == -1.0)  # nothing touches: close at full rate
-    forces = np.zeros((3, 20))
-    forces[:, 10] = 1.0  # all press 1 N, above the 0.2 N target: open
-    obs[layout["normal_forces"]] = forces.ravel()
-    assert np.all(policy(obs) > 0)
+    paper_action = PAPER_RATE / task.max_curvature_rate
+
+    def act(finger_forces):
+        obs = np.zeros(309, dtype=np.float32)
+        forces = np.zeros((3, 20))
+        forces[:, 10] = finger_forces
+        obs[layout["normal_forces"]] = forces.ravel()
+        return policy(obs)
+
+    np.testing.assert_allclose(act([0.0, 0.0, 0.0]), paper_action)  # nothing touches: the ramp
+    np.testing.assert_allclose(act([0.1, 0.0, 0.2]), paper_action)  # not caged yet
+    np.testing.assert_allclose(act([0.1, 0.1, 0.2]), 0.0)  # caged: hold κ̄
+    np.testing.assert_allclose(act([0.0, 0.5, 0.0]), 0.0)  # one finger at the band: hold
+    np.testing.assert_allclose(act([0.1, 0.9, 0.2]), 0.3)  # too hard: open
+    batch = np.stack([np.zeros(309, dtype=np.float32)] * 2)
+    assert policy(batch).shape == (2, 3)
     with pytest.raises(ValueError, match=r"rate = -2\.0 1/s is outside"):
         RampPolicy(rate=-2.0)
+    with pytest.raises(ValueError, match=r"force_band = \(0\.5, 0\.2\) N must satisfy"):
+        ReactivePolicy(task, force_band=(0.5, 0.2))
