@@ -71,9 +71,9 @@ def main(argv: list[str] | None = None) -> dict:
 
     env = VecNormalize(VecMonitor(SoftGripperSB3VecEnv(args.num_envs, seed=args.seed),
                                   info_keywords=("is_success",)), gamma=0.99)
-    model = PPO("MlpPolicy", env, n_steps=64, batch_size=512, n_epochs=5, learning_rate=3e-4, gamma=0.99,
-                gae_lambda=0.95, ent_coef=0.0, policy_kwargs={"net_arch": [128, 128]}, seed=args.seed, verbose=0,
-                device="cpu")
+    model = PPO("MlpPolicy", env, n_steps=64, batch_size=min(512, 64 * args.num_envs), n_epochs=5,
+                learning_rate=3e-4, gamma=0.99, gae_lambda=0.95, ent_coef=0.0,
+                policy_kwargs={"net_arch": [128, 128]}, seed=args.seed, verbose=0, device="cpu")
     progress = ProgressAndCurve(args.timesteps)
     checkpoints = CheckpointCallback(save_freq=max(1, 50_000 // args.num_envs), save_path=str(args.out / "checkpoints"),
                                      save_vecnormalize=True)

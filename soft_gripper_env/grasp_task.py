@@ -37,6 +37,9 @@ class RewardWeights:
     """Scale of each reward term (dimensionless). Each term is bounded: the positive ones lie in [0, weight], the
     penalties in [−weight, 0]."""
 
+    reach: float = 0.25
+    """Fingers near the object, 1 − tanh(gap/reach_distance) averaged over the fingers, the gap being the
+    distance from a finger's nearest node to the object's surface: it guides a policy to close the fingers."""
     contact: float = 0.25
     """Fraction of fingers in compressive contact."""
     hold: float = 1.0
@@ -84,6 +87,8 @@ class GraspTask:
     """Amplitude of the current's oscillating part, horizontal, in a random direction [m/s]."""
     current_period: tuple[float, float] = (1.0, 3.0)
     """Period of the current's oscillation [s]; its phase is drawn from [0, 2π)."""
+    reach_distance: float = 0.02
+    """Length scale of the reach term [m]."""
     contact_force: float = 0.01
     """A finger is in compressive contact when the normal reactions on its nodes sum to at least this [N]."""
     fragile_force: float = 0.5
@@ -125,8 +130,9 @@ class GraspTask:
             for v in value:
                 check_range("GraspTask", name, v, "m", low, high, low_inclusive=True)
             object.__setattr__(self, name, tuple(float(v) for v in value))
-        for name, unit in (("contact_force", "N"), ("fragile_force", "N"), ("hold_distance", "m"),
-                           ("rest_speed", "m/s"), ("success_duration", "s"), ("lost_distance", "m")):
+        for name, unit in (("reach_distance", "m"), ("contact_force", "N"), ("fragile_force", "N"),
+                           ("hold_distance", "m"), ("rest_speed", "m/s"), ("success_duration", "s"),
+                           ("lost_distance", "m")):
             check_range("GraspTask", name, getattr(self, name), unit, 0.0, 1e3)
         if not isinstance(self.reward, RewardWeights):
             raise ValueError(f"GraspTask.reward must be a RewardWeights, got {type(self.reward).__name__}")
@@ -344,6 +350,14 @@ class GraspBatch:
         return self.normal_force.sum(axis=2)
 
     @property
+    def finger_gap(self) -> np.ndarray:
+        """Distance from each finger's nearest node to the object's surface [m], (B, F); 0 in contact."""
+        nodes = self.sim.world_positions(self.state)  # (B, F, N, 3)
+        radius = np.array([scene.grasped_object.radius for scene in self.sim.scenes])
+        distance = np.linalg.norm(nodes - self.object_position[:, None, None, :], axis=-1).min(axis=2)
+        return np.maximum(distance - radius[:, None], 0.0)
+
+    @property
     def is_success(self) -> np.ndarray:
         """Held for at least ``success_duration`` without a break, (B,)."""
         return self.hold_time >= self.task.success_duration - 1e-9
@@ -356,6 +370,7 @@ class GraspBatch:
         speed = np.linalg.norm(self.object_velocity, axis=1)
         excess = np.maximum(self.finger_force.max(axis=1) - task.fragile_force, 0.0)
         terms = {
+            "reach": weights.reach * (1.0 - np.tanh(self.finger_gap / task.reach_distance)).mean(axis=1),
             "contact": weights.contact * touching.mean(axis=1),
             "hold": weights.hold * grasped * (1.0 - np.tanh(distance / task.hold_distance)),
             "rest": weights.rest * grasped * (1.0 - np.tanh(speed / task.rest_speed)),

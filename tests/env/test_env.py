@@ -84,17 +84,20 @@ def test_pickled_env_continues_identically(env):
 
 def test_reward_terms_sum_to_the_reward_and_info_types(env):
     obs, info = env.reset(seed=1)
-    assert set(info["reward_terms"]) == {"contact", "hold", "rest", "overload", "effort"}
+    assert set(info["reward_terms"]) == {"reach", "contact", "hold", "rest", "overload", "effort"}
     policy = RampPolicy(rate=-0.5)
     touched = False
+    reach = []
     for _ in range(20):
         obs, reward, terminated, truncated, info = env.step(policy(obs))
+        reach.append(info["reward_terms"]["reach"])
         assert isinstance(reward, float) and isinstance(terminated, bool) and isinstance(truncated, bool)
         assert reward == pytest.approx(sum(info["reward_terms"].values()), abs=1e-12)
         assert info["reward_terms"]["effort"] == pytest.approx(-0.05 * 1.0)
         touched |= info["reward_terms"]["contact"] > 0
         assert isinstance(info["is_success"], bool) and not info["solver_failure"]
     assert touched  # the contact term was exercised, not only zeros
+    assert 0.0 <= min(reach) and max(reach) <= 0.25 and max(reach) > reach[0] + 0.05  # closing fingers reach
 
 
 @pytest.mark.slow
