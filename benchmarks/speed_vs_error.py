@@ -122,8 +122,8 @@ def grid(quick: bool) -> list[Case]:
     for scene in ("cantilever_damped", "cantilever_undamped"):
         models = ("planar",) if quick else ("planar", "3d")
         nodes = (10, 20) if quick else (10, 20, 40)
-        for model, integrator, n, dt in itertools.product(models, ("backward_euler", "implicit_midpoint"), nodes,
-                                                          steps):
+        integrators = ("backward_euler", "implicit_midpoint", "midpoint_triple_jump")
+        for model, integrator, n, dt in itertools.product(models, integrators, nodes, steps):
             cases.append(Case(scene, model, "none", integrator, n, dt))
     if not quick:
         for model, drag, integrator, n, dt in itertools.product(("planar", "3d"), ("stokes", "water"),
@@ -183,7 +183,7 @@ def plot(rows, out: Path) -> None:
             series = sorted((r for r in selected if (r[1], r[2], r[3]) == (model, integrator, n)), key=lambda r: r[4])
             errors = np.array([r[6] for r in series])
             walls = np.array([r[5] for r in series])
-            style = "-" if integrator == "implicit_midpoint" else "--"
+            style = {"implicit_midpoint": "-", "midpoint_triple_jump": "-."}.get(integrator, "--")
             marker = "o" if model == "planar" else "s"
             line, = ax.loglog(errors, walls, style, marker=marker, ms=4, label=f"{model}, {integrator}, N = {n}")
             for r, e, w in zip(series, errors, walls, strict=True):

@@ -38,15 +38,20 @@ def relative_error(history, reference):
 
 
 @pytest.mark.slow
-def test_implicit_midpoint_keeps_the_oscillation_at_large_steps():
-    """The cantilever released straight under gravity, 2 s, Δt = 1e-2 s, against Δt = 2.5e-4 s. The midpoint rule
-    keeps the 5 Hz oscillation (its amplitude in the second second within 5 %); backward Euler damps most of it
-    away. The midpoint's remaining error is phase drift, (ωΔt)²/12 of the period per period."""
+def test_low_dissipation_integrators_keep_the_oscillation_at_large_steps():
+    """The cantilever released straight under gravity, 2 s, Δt = 1e-2 s, against Δt = 2.5e-4 s (issue 6: transient
+    tip error ≤ 20 %). The triple jump meets it (3.4 %). The midpoint rule keeps the 5 Hz oscillation (its
+    amplitude in the second second within 5 %) but drifts in phase by (ωΔt)²/12 of the period per period: 28 %.
+    Backward Euler damps most of the oscillation away."""
     reference = tip_history(CANTILEVER, "implicit_midpoint", 2.5e-4, 2.0, 0.01)
+    triple_jump = tip_history(CANTILEVER, "midpoint_triple_jump", 1e-2, 2.0, 0.01)
     midpoint = tip_history(CANTILEVER, "implicit_midpoint", 1e-2, 2.0, 0.01)
     euler = tip_history(CANTILEVER, "backward_euler", 1e-2, 2.0, 0.01)
     late = slice(100, None)
+    assert relative_error(triple_jump, reference) <= 0.2
+    assert np.ptp(triple_jump[late]) == pytest.approx(np.ptp(reference[late]), rel=0.02)
     assert np.ptp(midpoint[late]) == pytest.approx(np.ptp(reference[late]), rel=0.05)
+    assert 0.2 < relative_error(midpoint, reference) < 0.35  # the phase drift, as documented
     assert np.ptp(euler[late]) < 0.3 * np.ptp(reference[late])
 
 
@@ -63,14 +68,18 @@ def first_mode_velocity(scene, speed):
     return speed * velocity / np.abs(velocity).max()
 
 
+STEPS_BY_ORDER = {1: [4e-3, 2e-3, 1e-3, 5e-4], 2: [4e-3, 2e-3, 1e-3, 5e-4], 4: [1e-2, 5e-3, 2.5e-3, 1.25e-3]}
+
+
 @pytest.mark.parametrize("integrator", sorted(INTEGRATORS))
 def test_convergence_order(integrator):
-    """Measured order against a converged reference, on a motion in the discrete first mode only, so that no
-    unresolved stiff mode (the rod's axial and node-scale modes) masks the integrator's own order."""
+    """Measured order against a converged reference (the fourth-order triple jump at Δt = 2.5e-4 s), on a motion in
+    the discrete first mode only, so that no unresolved stiff mode (the rod's axial and node-scale modes) masks the
+    integrator's own order."""
     scene = replace(CANTILEVER, forces=())
     velocity = first_mode_velocity(scene, 0.01)
-    reference = tip_history(scene, "implicit_midpoint", 3.125e-5, 0.2, 0.02, velocity)
-    steps = np.array([4e-3, 2e-3, 1e-3, 5e-4])
+    reference = tip_history(scene, "midpoint_triple_jump", 2.5e-4, 0.2, 0.02, velocity)
+    steps = np.array(STEPS_BY_ORDER[INTEGRATORS[integrator].order])
     errors = np.array([relative_error(tip_history(scene, integrator, dt, 0.2, 0.02, velocity), reference)
                        for dt in steps])
     order = np.polyfit(np.log(steps), np.log(errors), 1)[0]
