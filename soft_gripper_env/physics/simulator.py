@@ -15,6 +15,7 @@ solved by Newton's method started from the predictor q_old + Δt·v_old.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
@@ -135,6 +136,7 @@ class Simulator:
         self._structure = _structure(scene)
         drag = [f for f in scene.forces if isinstance(f, MorisonDrag)]
         self._currents = CurrentBatch(B) if drag else None
+        self._water_cache: tuple[float, np.ndarray | None] = (math.nan, None)
         self._object = None
         self._body = None
         obj = scene.grasped_object
@@ -169,6 +171,7 @@ class Simulator:
         self._load(index, scene)
         if self._currents is not None:
             self._currents.start_time[index] = start_time
+            self._water_cache = (math.nan, None)
 
     def _load(self, index: int, scene: Scene) -> None:
         """Writes gripper ``index``'s object and current into the per-gripper arrays."""
@@ -308,6 +311,7 @@ class Simulator:
                 sub.set_scene(index, scene)
         if self._currents is not None:
             sub._currents.start_time[:] = self._currents.start_time[grippers]
+            sub._water_cache = (math.nan, None)
         return sub
 
     def equilibrium(self, state: RodState, natural_curvature, max_steps: int = 200) -> StepResult:
@@ -366,7 +370,7 @@ class Simulator:
             rod3d_elastic(q, *frames_old, disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness,
                           disc.twist_stiffness, disc.voronoi_length, kbar, force, band, hessian)
         if self.scene.forces:
-            water = None if self._currents is None else rod_water_velocity(disc, self._currents.at(time))
+            water = None if self._currents is None else self._rod_water_velocity(time)
             ctx = StepContext(time=time, start_positions=q_old[..., :D], velocity_derivative=1.0 / dt,
                               acceleration_derivative=1.0 / dt**2, water_velocity=water)
             velocity = (q[..., :D] - q_old[..., :D]) / dt
@@ -374,6 +378,12 @@ class Simulator:
             for model in self.scene.forces:
                 model.accumulate(disc, ctx, q[..., :D], velocity, acceleration, force[..., :D], band)
         return force, band
+
+    def _rod_water_velocity(self, time: float) -> np.ndarray:
+        """The current at every rod at ``time`` (R, D) [m/s], kept for the Newton iterations of a step."""
+        if self._water_cache[0] != time:
+            self._water_cache = (time, rod_water_velocity(self.disc, self._currents.at(time)))
+        return self._water_cache[1]
 
     def _free_mask(self, held: np.ndarray) -> np.ndarray:
         """Free DOFs of every rod, (R, n): the clamp's, less the positions of nodes held by contact."""
@@ -537,7 +547,7 @@ class Simulator:
         directions = self.disc.finger_directions
         normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(F)], axis=1)
         first = normals[np.argmax(touching, axis=1)]  # (B, 3): a touching finger's plane normal
-        parallel = np.all(~touching | np.isclose(np.abs(first @ normals.T), 1.0), axis=1)
+        parallel = np.all(~touching | (np.abs(np.abs(first @ normals.T) - 1.0) < 1e-9), axis=1)
         free = ~touching.any(axis=1)
         basis[free, 3:, 3:] = np.eye(3)
         one_axis = parallel & ~free
@@ -567,6 +577,7 @@ class Simulator:
         q_flat = q.reshape(R, n)
         held_positions = q[..., :D]
         water = np.zeros((B, 3)) if self._currents is None else self._currents.at(time)
+        basis = self._body_basis(held)  # the body's admissible motions (B, 6, k), fixed while the holds are
         for it in range(max_iterations + 1):
             orientation = rotation_exp(theta) @ orientation_old
             offsets_world = np.einsum("rij,rnj->rni", np.repeat(orientation, F, axis=0), offsets)
@@ -589,7 +600,6 @@ class Simulator:
                                                                  orientation_old, dt, water)
             body_residual = own + np.einsum("rnk,rn->rk", coupling, residual).reshape(B, F, 6).sum(axis=1)
             rod_ratio = np.max(np.abs(residual) * tolerance_inverse * free, axis=1).reshape(B, F).max(axis=1)
-            basis = self._body_basis(held)  # the body's admissible motions (B, 6, k)
             body_residual = np.einsum("bik,bi->bk", basis, body_residual)
             body_ratio = np.max(np.abs(body_residual) / self._body_tolerance, axis=1)
             ratio_now = np.maximum(rod_ratio, body_ratio)
