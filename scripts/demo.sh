@@ -1,6 +1,10 @@
 #!/usr/bin/env bash
-# Sets up .venv, then reproduces the paper's figures into out/paper (or the folder given as the first argument).
+# Sets up .venv, reproduces the paper's figures into out/paper, and records a video of the paper's ramp as a
+# policy in the SoftGripperUnderwater-v0 environment into out/video (or under the folder given as the first
+# argument).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 bash scripts/setup.sh
-exec .venv/bin/python examples/reproduce_paper.py --out "${1:-out/paper}"
+out="${1:-out}"
+.venv/bin/python examples/reproduce_paper.py --out "$out/paper"
+.venv/bin/python examples/record_ramp_video.py --out "$out/video"

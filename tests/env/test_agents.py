@@ -1,12 +1,17 @@
 """The SB3 adapter, the evaluation script and the PPO training script."""
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
 from agents.scripted import RampPolicy
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_sb3_vec_env_autoresets_in_the_same_step_and_reports_truncation():
@@ -54,3 +59,34 @@ def test_evaluate_reports_the_ramp(tmp_path):
     result = evaluate(RampPolicy(), episodes=1, seed=1000, progress=False, max_episode_steps=5)
     assert result["episodes"] == 1 and result["mean_length"] == 5
     assert result["mean_return"] == pytest.approx(result["returns"][0])
+
+
+def run_script(*args, timeout=600):
+    return subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+
+
+@pytest.mark.slow
+def test_record_video_example_writes_an_mp4(tmp_path):
+    out = run_script("examples/record_ramp_video.py", "--out", str(tmp_path), "--seed", "3")
+    assert out.returncode == 0, out.stderr
+    video = tmp_path / "ramp-episode-0.mp4"
+    assert video.exists() and video.stat().st_size > 10_000
+    assert "success" in out.stdout
+
+
+@pytest.mark.slow
+def test_env_speed_benchmark_writes_json_and_plot(tmp_path):
+    out = run_script("benchmarks/env_speed.py", "--json", str(tmp_path / "speed.json"), "--plot",
+                     str(tmp_path / "speed.png"), "--repeats", "1", "--steps", "2")
+    assert out.returncode == 0, out.stderr
+    results = json.loads((tmp_path / "speed.json").read_text())
+    assert set(results) == {"single_steps_per_s", "vector_1_env_steps_per_s", "vector_16_env_steps_per_s",
+                            "vector_64_env_steps_per_s", "vector_256_env_steps_per_s"}
+    assert all(v > 0 for v in results.values()) and (tmp_path / "speed.png").stat().st_size > 5000
+
+
+def test_scripts_reject_bad_arguments(tmp_path):
+    out = run_script("agents/evaluate.py", "--policy", "ramp", "--episodes", "0")
+    assert out.returncode == 2 and "--episodes = 0 must be at least 1" in out.stderr
+    out = run_script("agents/train_ppo.py", "--out", str(tmp_path), "--timesteps", "0")
+    assert out.returncode == 2 and "--timesteps = 0 must be at least 1" in out.stderr
