@@ -506,10 +506,20 @@ class Simulator:
         grippers = np.ones(B, dtype=bool)  # solved again: all at first, then those whose contacts changed
         for k in range(self.scene.contact.max_corrector_iterations + 1):
             rods = np.repeat(grippers, F)
-            q[rods] = q_start[rods]
-            c[grippers], theta[grippers] = c_start[grippers], theta_start[grippers]
-            solved = self._newton_with_body(q, q_old, q_pred, frames_old, kbar, state.time, dt, held, offsets,
-                                            body_old, c, theta, grippers)
+            if grippers.all():
+                q[:], c[:], theta[:] = q_start, c_start, theta_start
+                solved = self._newton_with_body(q, q_old, q_pred, frames_old, kbar, state.time, dt, held, offsets,
+                                                body_old, c, theta, grippers)
+            else:  # only the grippers whose contacts changed, as a batch of their own: cost ∝ their number
+                index = np.nonzero(grippers)[0]
+                sub = self._subsimulator(index)
+                q_sub, c_sub, theta_sub = q_start[rods], c_start[index], theta_start[index]
+                frames_sub = None if frames_old is None else tuple(f[rods] for f in frames_old)
+                solved = sub._newton_with_body(q_sub, q_old[rods], q_pred[rods], frames_sub, kbar[rods], state.time,
+                                               dt, held[rods], offsets[rods], tuple(b[index] for b in body_old),
+                                               c_sub, theta_sub, np.ones(len(index), dtype=bool))
+                q[rods], c[index], theta[index] = q_sub, c_sub, theta_sub
+                solved = [_spread(part, rods) for part in solved]
             for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
                 total[rods] = part[rods]
             position, orientation = c, rotation_exp(theta) @ body_old[2]
@@ -713,6 +723,13 @@ def put_grippers(record, index: np.ndarray, part):
     """A copy of ``record`` whose grippers ``index`` are taken from ``part``."""
     return replace(record, **{name: _set(value, index, getattr(part, name)) for name, value in vars(record).items()
                               if isinstance(value, np.ndarray)})
+
+
+def _spread(part: np.ndarray, rods: np.ndarray) -> np.ndarray:
+    """A sub-batch's per-rod ``part`` placed at ``rods`` (a mask) of a full-size array."""
+    out = np.zeros((len(rods),) + part.shape[1:], dtype=part.dtype)
+    out[rods] = part
+    return out
 
 
 def _set(array: np.ndarray, index: np.ndarray, values: np.ndarray) -> np.ndarray:
