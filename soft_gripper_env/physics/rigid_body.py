@@ -168,14 +168,15 @@ def rotation_exp(theta: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def eliminate_rods(band, residual, coupling, free, active, x0, x_coupling, body_block, body_rhs):
+def eliminate_rods(band, residual, coupling, free, active, coupled, x0, x_coupling, body_block, body_rhs):
     """Eliminates each active rod's free DOFs from the coupled Newton system.
 
     ``band`` (R, n, kd+1): the rod's Newton matrix A (overwritten by its factors); ``residual`` (R, n): G;
     ``coupling`` (R, n, 6): S, the motion of each held DOF per unit body motion (zero on other DOFs); ``free``
     (R, n): the DOFs solved for. Writes x0 = A_FF⁻¹·G_F (R, n), X = A_FF⁻¹·(A·S)_F (R, n, 6), the rod's part of the
     body's matrix Sᵀ·A·S − (A·S)_Fᵀ·X into ``body_block`` (R, 6, 6), and (A·S)_Fᵀ·x0 into ``body_rhs`` (R, 6).
-    Returns the number of rods whose factorisation failed.
+    A rod that holds nothing (``coupled`` False, S = 0) only solves for x0, and leaves the other outputs as given
+    (zero). Returns the number of rods whose factorisation failed.
     """
     n_rods, n, kd1 = band.shape
     kd = kd1 - 1
@@ -186,6 +187,14 @@ def eliminate_rods(band, residual, coupling, free, active, x0, x_coupling, body_
         if not active[r]:
             continue
         a = band[r]
+        if not coupled[r]:
+            if not factor_banded_symmetric(a, free[r]):
+                failures += 1
+                x0[r, :] = np.nan
+                continue
+            x0[r, :] = residual[r]
+            solve_factored(a, x0[r], free[r])
+            continue
         s = coupling[r]
         product[:, :] = 0.0  # A·S from the symmetric lower band
         for i in range(n):

@@ -588,27 +588,32 @@ class Simulator:
         held_positions = q[..., :D]
         water = np.zeros((B, 3)) if self._currents is None else self._currents.at(time)
         basis = self._body_basis(held)  # the body's admissible motions (B, 6, k), fixed while the holds are
+        touching = held.any(axis=1)  # the rods coupled to their body
         for it in range(max_iterations + 1):
             orientation = rotation_exp(theta) @ orientation_old
-            offsets_world = np.einsum("rij,rnj->rni", np.repeat(orientation, F, axis=0), offsets)
-            nodes_world = np.repeat(c, F, axis=0)[:, None, :] + offsets_world
-            held_positions[held] = np.einsum("rdj,rnj->rnd", projection, nodes_world)[held]
+            a = np.einsum("rij,rnj->rni", np.repeat(orientation, F, axis=0)[touching], offsets[touching])
+            nodes_world = np.repeat(c, F, axis=0)[touching][:, None, :] + a
+            positions = held_positions[touching]
+            positions[held[touching]] = np.einsum("rdj,rnj->rnd", projection[touching], nodes_world)[held[touching]]
+            held_positions[touching] = positions
             force, band = self._assemble(q, q_old, q_pred, frames_old, kbar, time, dt)
             residual = mass_term * (q_flat - q_pred.reshape(R, n)) - force.reshape(R, n)
-            # S: a held DOF's motion per unit body motion (δc, δθ): P·(δc − [a]×·δθ)
-            coupling = np.zeros((R, N, S, 6))
-            cross = np.zeros((R, N, 3, 3))
-            cross[..., 0, 1], cross[..., 0, 2], cross[..., 1, 2] = (-offsets_world[..., 2], offsets_world[..., 1],
-                                                                    -offsets_world[..., 0])
+            # S: a held DOF's motion per unit body motion (δc, δθ): P·(δc − [a]×·δθ); zero on rods holding nothing
+            cross = np.zeros(a.shape + (3,))
+            cross[..., 0, 1], cross[..., 0, 2], cross[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
             cross -= np.swapaxes(cross, -1, -2)
-            rod_projection = projection[:, None, :, :]
-            coupling[..., :D, :3] = np.broadcast_to(rod_projection, (R, N, D, 3))
-            coupling[..., :D, 3:] = -rod_projection @ cross
-            coupling *= held[..., None, None]
-            coupling = coupling.reshape(R, n, 6)
+            rod_projection = projection[touching][:, None, :, :]
+            part = np.zeros((len(a), N, S, 6))
+            part[..., :D, :3] = np.broadcast_to(rod_projection, (len(a), N, D, 3))
+            part[..., :D, 3:] = -rod_projection @ cross
+            part *= held[touching][..., None, None]
+            coupling = np.zeros((R, n, 6))
+            coupling[touching] = part.reshape(len(a), n, 6)
             own, translational, rotational = self._body.residual(c, c_old, u_old, theta, w_old, orientation,
                                                                  orientation_old, dt, water)
-            body_residual = own + np.einsum("rnk,rn->rk", coupling, residual).reshape(B, F, 6).sum(axis=1)
+            reaction_load = np.zeros((R, 6))
+            reaction_load[touching] = np.einsum("rnk,rn->rk", coupling[touching], residual[touching])
+            body_residual = own + reaction_load.reshape(B, F, 6).sum(axis=1)
             rod_ratio = np.max(np.abs(residual) * tolerance_inverse * free, axis=1).reshape(B, F).max(axis=1)
             body_residual = np.einsum("bik,bi->bk", basis, body_residual)
             body_ratio = np.max(np.abs(body_residual) / self._body_tolerance, axis=1)
@@ -625,7 +630,7 @@ class Simulator:
             x_coupling = np.zeros((R, n, 6))
             block = np.zeros((R, 6, 6))
             rhs = np.zeros((R, 6))
-            eliminate_rods(band, residual, coupling, free, rods, x0, x_coupling, block, rhs)
+            eliminate_rods(band, residual, coupling, free, rods, touching, x0, x_coupling, block, rhs)
             matrix = block.reshape(B, F, 6, 6).sum(axis=1)
             matrix[:, :3, :3] += translational
             matrix[:, 3:, 3:] += rotational
@@ -635,7 +640,8 @@ class Simulator:
             reduced_rhs = -body_residual + np.einsum("bik,bi->bk", basis, rhs.reshape(B, F, 6).sum(axis=1))
             step[active] = np.einsum("bik,bk->bi", basis[active],
                                      np.linalg.solve(reduced[active], reduced_rhs[active][..., None])[..., 0])
-            rod_step = -x0 - np.einsum("rnk,rk->rn", x_coupling, np.repeat(step, F, axis=0))
+            rod_step = -x0
+            rod_step[touching] -= np.einsum("rnk,rk->rn", x_coupling[touching], np.repeat(step, F, axis=0)[touching])
             q_flat[rods] += np.where(free[rods], rod_step[rods], 0.0)
             c[active] += step[active, :3]
             theta[active] += step[active, 3:]
