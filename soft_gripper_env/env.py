@@ -130,7 +130,7 @@ class SoftGripperUnderwaterEnv(gym.Env):
     =========  ===========================================================================  =============
     term       value                                                                        range
     =========  ===========================================================================  =============
-    reach      0.25 × mean over fingers of 1 − tanh(gap / 0.02 m), the gap from a finger's   [0, 0.25]
+    reach      0.25 × mean over fingers of 1 − tanh(gap / 0.05 m), the gap from a finger's   [0, 0.25]
                nearest node to the sphere's surface
     contact    0.25 × fraction of fingers in compressive contact (Σ normal force ≥ 0.01 N)   [0, 0.25]
     hold       1.0 × (1 − tanh(d / 0.03 m)), d the distance to the grasp point (0, 0, −0.1)  [0, 1]

@@ -87,7 +87,7 @@ class GraspTask:
     """Amplitude of the current's oscillating part, horizontal, in a random direction [m/s]."""
     current_period: tuple[float, float] = (1.0, 3.0)
     """Period of the current's oscillation [s]; its phase is drawn from [0, 2π)."""
-    reach_distance: float = 0.02
+    reach_distance: float = 0.05
     """Length scale of the reach term [m]."""
     contact_force: float = 0.01
     """A finger is in compressive contact when the normal reactions on its nodes sum to at least this [N]."""
