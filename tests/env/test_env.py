@@ -308,3 +308,62 @@ def test_reactive_policy_acts_per_observation():
         RampPolicy(rate=-2.0)
     with pytest.raises(ValueError, match=r"force_band = \(0\.5, 0\.2\) N must satisfy"):
         ReactivePolicy(task, force_band=(0.5, 0.2))
+
+
+def test_reactive_grasp_succeeds_after_a_one_second_hold():
+    """Seed 1000 is one the reactive controller grasps: is_success turns on once the hold has lasted 1 s, not
+    before, and the hold clock in info explains it."""
+    env = gym.make(ENV_ID)
+    policy = ReactivePolicy()
+    obs, info = env.reset(seed=1000)
+    flags, holds = [], []
+    done = False
+    while not done:
+        obs, reward, terminated, truncated, info = env.step(policy(obs))
+        flags.append(info["is_success"])
+        holds.append(info["hold_time_s"])
+        done = terminated or truncated
+    assert flags[-1] and not terminated
+    first = flags.index(True)
+    assert holds[first] == pytest.approx(1.0) and all(h < 1.0 - 1e-9 for h in holds[:first])
+    assert all(holds[k] == pytest.approx(holds[k - 1] + 0.05) or holds[k] == 0.0 for k in range(1, len(holds)))
+
+
+def test_object_swept_away_by_the_current_terminates_the_episode():
+    env = gym.make(ENV_ID)
+    env.reset(seed=0, options={"current_velocity": (0.45, 0.0, 0.0), "current_oscillation": (0.0, 0.0, 0.0)})
+    layout = observation_slices(GraspTask())
+    steps = 0
+    terminated = truncated = False
+    while not (terminated or truncated):
+        obs, reward, terminated, truncated, info = env.step(np.zeros(3))
+        steps += 1
+    assert terminated and not truncated and steps < 60
+    assert np.linalg.norm(obs[layout["object_position"]] - np.array([0.0, 0.0, -0.1])) > 0.15
+
+
+def test_three_dimensional_fingers():
+    env = gym.make(ENV_ID, model="3d")
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (429,) and env.observation_space.contains(obs)
+    layout = observation_slices(GraspTask(model="3d"))
+    for _ in range(5):
+        obs, reward, terminated, truncated, info = env.step(np.full(3, -1.0))
+        assert env.observation_space.contains(obs)
+    tips = obs[layout["node_positions"]].reshape(3, 20, 3)[:, -1]
+    assert np.all(tips[:, 2] < -1e-3)  # every fingertip curls down
+
+
+def test_human_render_mode_draws_without_a_display(monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    env = gym.make(ENV_ID, render_mode="human")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Agg cannot show a window; the frame is still drawn into the figure
+        env.reset(seed=0)
+        env.step(np.zeros(3))
+    figure, image = env.unwrapped._window
+    assert image.get_array().shape == (480, 480, 3)
+    env.close()
+    assert env.unwrapped._window is None
