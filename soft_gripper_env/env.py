@@ -14,7 +14,6 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .grasp_task import GraspBatch, GraspTask, check_options, task_scene
-from .physics import NATURAL_CURVATURE_LIMIT
 
 DEFAULT_MAX_EPISODE_STEPS = 60
 """Episode length of the registered environment: 60 actions of 0.05 s, 3 s."""
@@ -348,4 +347,4 @@ def _masked(infos: dict[str, Any]) -> dict[str, Any]:
 
 
 __all__ = ["SoftGripperUnderwaterEnv", "SoftGripperUnderwaterVectorEnv", "DEFAULT_MAX_EPISODE_STEPS",
-           "NATURAL_CURVATURE_LIMIT"]
+           "observation_slices", "observation_bounds"]
