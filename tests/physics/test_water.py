@@ -213,8 +213,20 @@ def test_water_medium_lists_only_fluid_forces_it_uses():
     (lambda: AddedMass(fluid_density=float("nan")), r"AddedMass\.fluid_density = nan kg/m³"),
     (lambda: Current(velocity=(0.0, 1.0)), r"Current\.velocity = \(0\.0, 1\.0\) must have 3 components"),
     (lambda: Current(period=0.0), r"Current\.period = 0\.0 s"),
+    (lambda: Current(phase=float("nan")), r"Current\.phase = nan rad"),
     (lambda: Current(velocity=(0.0, float("inf"), 0.0)), r"Current\.velocity = inf m/s"),
 ])
 def test_bad_water_parameters_raise(make, pattern):
     with pytest.raises(ValueError, match=pattern):
         make()
+
+
+def test_current_phase_and_each_grippers_clock():
+    current = Current(velocity=(0.1, 0.0, 0.0), oscillation=(0.0, 0.2, 0.0), period=2.0, phase=0.5)
+    np.testing.assert_allclose(current.at(0.25), [0.1, 0.2 * math.sin(2 * math.pi * 0.125 + 0.5), 0.0], rtol=1e-15)
+    from soft_gripper_env.physics.hydrodynamics import CurrentBatch
+
+    batch = CurrentBatch.of([current, current])
+    batch.start_time[1] = 0.75  # gripper 1's episode began at batch time 0.75 s
+    np.testing.assert_allclose(batch.at(1.0)[1], current.at(0.25), rtol=1e-14)
+    np.testing.assert_allclose(batch.at(1.0)[0], current.at(1.0), rtol=1e-15)
