@@ -183,21 +183,16 @@ def check_options(options: dict | None) -> dict:
         check_range("reset option", "current_phase", options["current_phase"], "rad", -1e3, 1e3, low_inclusive=True)
     for name, (bound, unit) in VECTOR_OPTIONS.items():
         if name in options:
-            value = np.asarray(options[name], dtype=float) if _is_numeric(options[name]) else None
+            try:
+                value = np.asarray(options[name], dtype=float)
+            except (TypeError, ValueError):
+                value = None
             if value is None or value.shape != (3,):
                 raise ValueError(f"reset option {name} = {options[name]!r} must have 3 components")
             for v in value:
                 check_range("reset option", name, v, unit, -bound, bound, low_inclusive=True)
             checked[name] = tuple(float(v) for v in value)
     return checked
-
-
-def _is_numeric(value) -> bool:
-    try:
-        np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        return False
-    return True
 
 
 def task_scene(task: GraspTask, rng: np.random.Generator, options: dict) -> Scene:

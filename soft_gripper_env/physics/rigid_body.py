@@ -187,37 +187,32 @@ def eliminate_rods(band, residual, coupling, free, active, coupled, x0, x_coupli
         if not active[r]:
             continue
         a = band[r]
-        if not coupled[r]:
-            if not factor_banded_symmetric(a, free[r]):
-                failures += 1
-                x0[r, :] = np.nan
-                continue
-            x0[r, :] = residual[r]
-            solve_factored(a, x0[r], free[r])
-            continue
         s = coupling[r]
-        product[:, :] = 0.0  # A·S from the symmetric lower band
-        for i in range(n):
-            for j in range(max(0, i - kd), i + 1):
-                value = a[i, kd - i + j]
-                if value == 0.0:
-                    continue
-                for k in range(6):
-                    product[i, k] += value * s[j, k]
-                    if i != j:
-                        product[j, k] += value * s[i, k]
-        for k in range(6):
-            for m in range(6):
-                total = 0.0
-                for i in range(n):
-                    total += s[i, k] * product[i, m]
-                body_block[r, k, m] = total
+        if coupled[r]:  # Sᵀ·A·S needs A before it is factored
+            product[:, :] = 0.0  # A·S from the symmetric lower band
+            for i in range(n):
+                for j in range(max(0, i - kd), i + 1):
+                    value = a[i, kd - i + j]
+                    if value == 0.0:
+                        continue
+                    for k in range(6):
+                        product[i, k] += value * s[j, k]
+                        if i != j:
+                            product[j, k] += value * s[i, k]
+            for k in range(6):
+                for m in range(6):
+                    total = 0.0
+                    for i in range(n):
+                        total += s[i, k] * product[i, m]
+                    body_block[r, k, m] = total
         if not factor_banded_symmetric(a, free[r]):
             failures += 1
             x0[r, :] = np.nan
             continue
         x0[r, :] = residual[r]
         solve_factored(a, x0[r], free[r])
+        if not coupled[r]:
+            continue
         for k in range(6):
             for i in range(n):
                 column[i] = product[i, k] if free[r, i] else 0.0

@@ -155,6 +155,9 @@ class Simulator:
             R, D = self.n_rods, self.disc.dim
             self._object = (np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), np.zeros(R, dtype=bool))
         for index, each in enumerate(self.scenes):
+            if each is not scene and _structure(each) != self._structure:
+                raise ValueError(f"Simulator.scene[{index}] differs from scene[0] in more than the grasped object's "
+                                 f"size, place, density and velocity and the water's current")
             self._load(index, each)
 
     def set_scene(self, index: int, scene: Scene, start_time: float = 0.0) -> None:
@@ -174,10 +177,7 @@ class Simulator:
             self._water_cache = (math.nan, None)
 
     def _load(self, index: int, scene: Scene) -> None:
-        """Writes gripper ``index``'s object and current into the per-gripper arrays."""
-        if index > 0 and _structure(scene) != self._structure:
-            raise ValueError(f"Simulator.scene[{index}] differs from scene[0] in more than the grasped object's size, "
-                             f"place, density and velocity and the water's current")
+        """Writes gripper ``index``'s object and current into the per-gripper arrays (the scene already checked)."""
         if self._currents is not None:
             self._currents.load(index, next(f for f in scene.forces if isinstance(f, MorisonDrag)).current)
         obj = scene.grasped_object
@@ -519,9 +519,8 @@ class Simulator:
                                                dt, held[rods], offsets[rods], tuple(b[index] for b in body_old),
                                                c_sub, theta_sub, np.ones(len(index), dtype=bool))
                 q[rods], c[index], theta[index] = q_sub, c_sub, theta_sub
-                solved = [_spread(part, rods) for part in solved]
             for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
-                total[rods] = part[rods]
+                total[rods] = part  # every rod when all grippers were solved, else the sub-batch's
             position, orientation = c, rotation_exp(theta) @ body_old[2]
             starts, ends, radii = self._body_in_rod_frames(position, orientation)
             hold_at = np.zeros((R, N, D))
@@ -729,13 +728,6 @@ def put_grippers(record, index: np.ndarray, part):
     """A copy of ``record`` whose grippers ``index`` are taken from ``part``."""
     return replace(record, **{name: _set(value, index, getattr(part, name)) for name, value in vars(record).items()
                               if isinstance(value, np.ndarray)})
-
-
-def _spread(part: np.ndarray, rods: np.ndarray) -> np.ndarray:
-    """A sub-batch's per-rod ``part`` placed at ``rods`` (a mask) of a full-size array."""
-    out = np.zeros((len(rods),) + part.shape[1:], dtype=part.dtype)
-    out[rods] = part
-    return out
 
 
 def _set(array: np.ndarray, index: np.ndarray, values: np.ndarray) -> np.ndarray:
