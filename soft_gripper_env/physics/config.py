@@ -18,6 +18,7 @@ import numpy as np
 
 from .contact import Capsule, ContactSettings, GraspedObject, Sphere
 from .forces import ForceModel, Gravity, StokesDrag
+from .hydrodynamics import MorisonDrag, fluid_forces
 from .integrators import INTEGRATORS
 from .validation import check_range
 
@@ -210,6 +211,10 @@ class Scene:
                 raise ValueError(f"Scene.forces must hold ForceModel instances, got {type(force).__name__}")
             if isinstance(force, StokesDrag):
                 force.check_nodes(self.gripper.finger.n_nodes)
+        drags = [f for f in self.forces if isinstance(f, MorisonDrag)]
+        if len(drags) > 1:
+            raise ValueError(f"Scene.forces holds {len(drags)} MorisonDrag models; at most one is allowed (the water "
+                             f"has one current)")
 
     @property
     def n_steps(self) -> int:
@@ -246,7 +251,6 @@ def paper_scene(model: RodModel = "planar", *, material: Material = ELASTOSIL_MA
     added mass. A tuple of force models replaces them, e.g. ``(PAPER_DEFECTIVE_DRAG,)``. ``grasped_object`` adds
     contact, e.g. with the paper's fixed ball :data:`~.contact.PAPER_BALL`.
     """
-    from .hydrodynamics import fluid_forces
 
     forces: tuple[ForceModel, ...] = (Gravity(),)
     forces += tuple(medium) if isinstance(medium, tuple) else fluid_forces(medium)

@@ -165,6 +165,8 @@ class ContactReport:
     """Re-solves the step needed, (B,)."""
     resolved: np.ndarray
     """Whether the corrector ended with no penetrating node and no adhesive hold, (B,)."""
+    palm_reaction: np.ndarray | None = None
+    """Force of a free object on the palm [N], (B, 3); zero where it does not touch; None for a fixed object."""
 
     @property
     def finger_reaction(self) -> np.ndarray:
@@ -173,8 +175,9 @@ class ContactReport:
 
     @property
     def total_reaction(self) -> np.ndarray:
-        """Sum of the reactions on the gripper [N], (B, 3)."""
-        return self.reaction.sum(axis=(1, 2))
+        """Sum of the reactions on the gripper, fingers and palm [N], (B, 3)."""
+        total = self.reaction.sum(axis=(1, 2))
+        return total if self.palm_reaction is None else total + self.palm_reaction
 
 
 def object_in_rod_frames(obj: GraspedObject, finger_directions: np.ndarray,

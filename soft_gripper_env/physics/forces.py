@@ -1,7 +1,22 @@
-"""External force models: each one adds its generalized force and its Jacobian to the implicit system.
+"""External force models: each one declares the terms it adds to the implicit system.
 
-Every model implements :meth:`ForceModel.accumulate`. The simulator sums the models a scene lists, and nothing else:
-a scene without drag pays nothing for drag. Arrays follow the layout of :class:`~.discretization.Discretization`:
+A model's :meth:`ForceModel.terms` gives its coefficients; :class:`ForceTerms` sums the models a scene lists into
+one set of per-node and per-edge arrays, which the compiled assembly (:mod:`.assembly`) evaluates together with
+the elastic forces. A term no model gives is an empty array and costs nothing: a scene without drag pays nothing
+for drag.
+
+==================  =====================================================  =========  ========
+term                force on the rod                                       unit       shape
+==================  =====================================================  =========  ========
+``node_force``      a constant force per node (weight, buoyancy)            N          (N, D)
+``damping``         −c_i·v_i, linear and isotropic per node                 N·s/m      (N,)
+``drag_normal``     Morison drag per edge, ½·ρ_w·C_n·D·l̄ (hydrodynamics)    kg/m       (N − 1,)
+``drag_tangential`` its tangential part, ½·ρ_w·C_t·π·D·l̄                    kg/m       (N − 1,)
+``added_mass``      the water an edge carries normal to itself              kg         (N − 1,)
+==================  =====================================================  =========  ========
+
+:meth:`ForceModel.accumulate` evaluates one model alone through the same kernel, with the array layout of
+:class:`~.discretization.Discretization`:
 
 =================  ===============================================================  ============
 name               meaning                                                          shape
@@ -58,10 +73,58 @@ class StepContext:
 class ForceModel:
     """Interface of every external force. Subclasses are frozen dataclasses holding their parameters in SI units."""
 
+    def terms(self, disc: Discretization) -> dict[str, np.ndarray]:
+        """This model's terms, by the names of :class:`ForceTerms`' fields."""
+        raise NotImplementedError
+
     def accumulate(self, disc: Discretization, ctx: StepContext, positions: np.ndarray, velocities: np.ndarray,
                    accelerations: np.ndarray, force: np.ndarray, system_band: np.ndarray) -> None:
-        """Add this model's force [N] to ``force`` and its negated Jacobian to ``system_band``."""
-        raise NotImplementedError
+        """Add this model's force [N] to ``force`` and its negated Jacobian to ``system_band`` (evaluated alone,
+        through the kernel the simulator runs)."""
+        from .assembly import external_forces  # the assembly imports every model's kernels
+
+        water = ctx.water_velocity
+        if water is None:
+            water = self.standalone_water_velocity(disc, ctx.time, positions.shape[0])
+        external_forces(positions, ctx.start_positions, velocities, accelerations, water,
+                        ForceTerms.of(disc, (self,)).arrays(), ctx.velocity_derivative, ctx.acceleration_derivative,
+                        disc.stride, force, system_band)
+
+    def standalone_water_velocity(self, disc: Discretization, time: float, n_rods: int) -> np.ndarray:
+        """The water's velocity at every rod (R, D) [m/s] when the model is evaluated on its own: still water."""
+        return np.zeros((n_rods, disc.dim))
+
+
+@dataclass(frozen=True, eq=False)
+class ForceTerms:
+    """The summed terms of a scene's force models (see the module notes); an absent term is an empty array."""
+
+    node_force: np.ndarray
+    """Constant force per node [N], (N, D)."""
+    damping: np.ndarray
+    """Linear damping coefficient per node [N·s/m], (N,)."""
+    drag_normal: np.ndarray
+    """½·ρ_w·C_n·D·l̄ per edge [kg/m], (N − 1,)."""
+    drag_tangential: np.ndarray
+    """½·ρ_w·C_t·π·D·l̄ per edge [kg/m], (N − 1,)."""
+    added_mass: np.ndarray
+    """Added mass of each edge for motion normal to it [kg], (N − 1,)."""
+
+    @classmethod
+    def of(cls, disc: Discretization, models) -> ForceTerms:
+        parts = [model.terms(disc) for model in models]
+
+        def total(name: str, ndim: int) -> np.ndarray:
+            given = [part[name] for part in parts if name in part]
+            return np.ascontiguousarray(sum(given[1:], given[0]), dtype=float) if given else np.zeros((0,) * ndim)
+
+        return cls(node_force=total("node_force", 2), damping=total("damping", 1),
+                   drag_normal=total("drag_normal", 1), drag_tangential=total("drag_tangential", 1),
+                   added_mass=total("added_mass", 1))
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The terms in the order the compiled kernels take them."""
+        return self.node_force, self.damping, self.drag_normal, self.drag_tangential, self.added_mass
 
     def potential_energy(self, disc: Discretization, positions: np.ndarray) -> np.ndarray | None:
         """Potential energy of a conservative force per rod [J], (R,); None for a force that has none."""
@@ -78,8 +141,8 @@ class Gravity(ForceModel):
     def __post_init__(self) -> None:
         _check_positive("Gravity", "acceleration", self.acceleration, "m/s²")
 
-    def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
-        force[..., disc.vertical_axis] -= disc.node_mass * self.acceleration
+    def terms(self, disc):
+        return {"node_force": _vertical(disc, -disc.node_mass * self.acceleration)}
 
     def potential_energy(self, disc, positions):
         return positions[..., disc.vertical_axis] @ (disc.node_mass * self.acceleration)
@@ -98,8 +161,8 @@ class Buoyancy(ForceModel):
         _check_positive("Buoyancy", "fluid_density", self.fluid_density, "kg/m³")
         _check_positive("Buoyancy", "acceleration", self.acceleration, "m/s²")
 
-    def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
-        force[..., disc.vertical_axis] += disc.node_volume * (self.fluid_density * self.acceleration)
+    def terms(self, disc):
+        return {"node_force": _vertical(disc, disc.node_volume * (self.fluid_density * self.acceleration))}
 
     def potential_energy(self, disc, positions):
         return -positions[..., disc.vertical_axis] @ (disc.node_volume * (self.fluid_density * self.acceleration))
@@ -133,13 +196,13 @@ class StokesDrag(ForceModel):
             raise ValueError(f"StokesDrag.nodes = {self.nodes!r} names node {max(self.nodes)}; the finger has nodes "
                              f"0 … {n_nodes - 1}")
 
-    def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
+    def terms(self, disc):
         coefficient = 6.0 * math.pi * self.viscosity * disc.node_radius  # [N·s/m], shape (N,)
         if self.nodes is not None:
             selected = np.zeros_like(coefficient)
             selected[list(self.nodes)] = coefficient[list(self.nodes)]
             coefficient = selected
-        _add_linear_damping(disc, coefficient, velocities, force, system_band, ctx.velocity_derivative)
+        return {"damping": coefficient}
 
 
 @dataclass(frozen=True)
@@ -152,28 +215,28 @@ class MassProportionalDamping(ForceModel):
     def __post_init__(self) -> None:
         _check_positive("MassProportionalDamping", "rate", self.rate, "1/s")
 
-    def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
-        _add_linear_damping(disc, self.rate * disc.node_mass, velocities, force, system_band,
-                            ctx.velocity_derivative)
+    def terms(self, disc):
+        return {"damping": self.rate * disc.node_mass}
 
 
-def _add_linear_damping(disc: Discretization, coefficient: np.ndarray, velocities: np.ndarray, force: np.ndarray,
-                        system_band: np.ndarray, velocity_derivative: float) -> None:
-    """f = −c_i·v_i per node, isotropic; Jacobian −c_i·∂v/∂q on the diagonal."""
-    linear_damping(coefficient, velocities, velocity_derivative, disc.stride, force, system_band)
+def _vertical(disc: Discretization, value: np.ndarray) -> np.ndarray:
+    """A per-node force (N, D) [N] of vertical component ``value`` (N,)."""
+    force = np.zeros((disc.n_nodes, disc.dim))
+    force[:, disc.vertical_axis] = value
+    return force
 
 
 @njit(cache=True, error_model="numpy")
 def linear_damping(coefficient, velocities, velocity_derivative, stride, force, band):
-    """Adds −c_i·v_i to ``force`` (R, N, D) and c_i·∂v/∂q to the position diagonal of ``band`` (R, n, kd+1)."""
-    n_rods, n_nodes, dim = velocities.shape
-    kd = band.shape[2] - 1
-    for r in range(n_rods):
-        for i in range(n_nodes):
-            c = coefficient[i]
-            for k in range(dim):
-                force[r, i, k] -= c * velocities[r, i, k]
-                band[r, stride * i + k, kd] += c * velocity_derivative
+    """Adds −c_i·v_i to one rod's ``force`` (N, D) and c_i·∂v/∂q to the position diagonal of its ``band``
+    (n, kd+1)."""
+    n_nodes, dim = velocities.shape
+    kd = band.shape[1] - 1
+    for i in range(n_nodes):
+        c = coefficient[i]
+        for k in range(dim):
+            force[i, k] -= c * velocities[i, k]
+            band[stride * i + k, kd] += c * velocity_derivative
 
 
-__all__ = ["ForceModel", "StepContext", "Gravity", "Buoyancy", "StokesDrag", "MassProportionalDamping"]
+__all__ = ["ForceModel", "ForceTerms", "StepContext", "Gravity", "Buoyancy", "StokesDrag", "MassProportionalDamping"]

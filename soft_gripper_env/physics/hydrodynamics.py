@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -138,20 +137,16 @@ class MorisonDrag(ForceModel):
         if not isinstance(self.current, Current):
             raise ValueError(f"MorisonDrag.current must be a Current, got {type(self.current).__name__}")
 
-    def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
-        normal, tangential = self.edge_coefficients(disc)
-        current = ctx.water_velocity
-        if current is None:  # standalone use: the model's own current at every rod
-            n_grippers = positions.shape[0] // len(disc.finger_directions)
-            current = rod_water_velocity(disc, np.tile(self.current.at(ctx.time), (n_grippers, 1)))
-        morison_drag(positions, velocities, current, normal, tangential, ctx.velocity_derivative, disc.stride, force,
-                     system_band)
-
-    @lru_cache(maxsize=16)  # noqa: B019 - frozen, hashable models and discretizations; a handful per process
-    def edge_coefficients(self, disc: Discretization) -> tuple[np.ndarray, np.ndarray]:
+    def terms(self, disc):
         """½·ρ_w·C_n·D·l̄ and ½·ρ_w·C_t·π·D·l̄ of every edge [kg/m], (N − 1,) each."""
         half_density_area = 0.5 * self.fluid_density * _edge_diameter(disc) * disc.rest_edge_length
-        return half_density_area * self.normal_coefficient, half_density_area * (math.pi * self.tangential_coefficient)
+        return {"drag_normal": half_density_area * self.normal_coefficient,
+                "drag_tangential": half_density_area * (math.pi * self.tangential_coefficient)}
+
+    def standalone_water_velocity(self, disc, time, n_rods):
+        """The model's own current at every rod (R, D) [m/s]."""
+        n_grippers = n_rods // len(disc.finger_directions)
+        return rod_water_velocity(disc, np.tile(self.current.at(time), (n_grippers, 1)))
 
 
 @dataclass(frozen=True)
@@ -167,14 +162,10 @@ class AddedMass(ForceModel):
         _check_positive("AddedMass", "coefficient", self.coefficient, "(dimensionless)")
         _check_positive("AddedMass", "fluid_density", self.fluid_density, "kg/m³")
 
-    @lru_cache(maxsize=16)  # noqa: B019 - frozen, hashable models and discretizations; a handful per process
-    def edge_mass(self, disc: Discretization) -> np.ndarray:
+    def terms(self, disc):
         """Added mass of each edge for motion normal to it [kg], (N − 1,)."""
-        return self.coefficient * self.fluid_density * math.pi / 4 * _edge_diameter(disc) ** 2 * disc.rest_edge_length
-
-    def accumulate(self, disc, ctx, positions, velocities, accelerations, force, system_band):
-        added_mass(ctx.start_positions, accelerations, self.edge_mass(disc), ctx.acceleration_derivative,
-                   disc.stride, force, system_band)
+        return {"added_mass": self.coefficient * self.fluid_density * math.pi / 4 * _edge_diameter(disc) ** 2
+                * disc.rest_edge_length}
 
 
 @njit(cache=True, error_model="numpy")
@@ -195,11 +186,11 @@ def _add_edge_block(band_r, stride, i, dim, block, scale):
 
 
 @njit(cache=True, error_model="numpy")
-def _edge_tangent(positions, r, e, t):
-    """Writes the unit tangent of edge e of rod r into ``t`` (D,)."""
+def _edge_tangent(positions, e, t):
+    """Writes the unit tangent of edge e of one rod (positions (N, D)) into ``t`` (D,)."""
     length2 = 0.0
     for k in range(t.size):
-        t[k] = positions[r, e + 1, k] - positions[r, e, k]
+        t[k] = positions[e + 1, k] - positions[e, k]
         length2 += t[k] * t[k]
     inverse_length = 1.0 / math.sqrt(length2)
     for k in range(t.size):
@@ -208,69 +199,68 @@ def _edge_tangent(positions, r, e, t):
 
 @njit(cache=True, error_model="numpy")
 def morison_drag(positions, velocities, current, normal, tangential, velocity_derivative, stride, force, band):
-    """Morison drag of every edge: adds the force to ``force`` (R, N, D) and its velocity Jacobian to ``band``.
+    """Morison drag of every edge of one rod: adds the force to ``force`` (N, D) and its velocity Jacobian to
+    ``band`` (n, kd+1).
 
-    ``normal``, ``tangential``: ½·ρ_w·C·D·l̄ per edge [kg/m] (the tangential one with π·D); ``current`` (R, D).
+    ``normal``, ``tangential``: ½·ρ_w·C·D·l̄ per edge [kg/m] (the tangential one with π·D); ``current`` (D,).
     """
-    n_rods, n_nodes, dim = positions.shape
+    n_nodes, dim = positions.shape
     t = np.empty(dim)
     w = np.empty(dim)
     wn = np.empty(dim)
     block = np.empty((dim, dim))
-    for r in range(n_rods):
-        for e in range(n_nodes - 1):
-            _edge_tangent(positions, r, e, t)
-            s = 0.0
-            for k in range(dim):
-                w[k] = 0.5 * (velocities[r, e, k] + velocities[r, e + 1, k]) - current[r, k]
-                s += w[k] * t[k]
-            speed_n2 = 0.0
-            for k in range(dim):
-                wn[k] = w[k] - s * t[k]
-                speed_n2 += wn[k] * wn[k]
-            speed_n = math.sqrt(speed_n2)
-            cn = normal[e]
-            ct = tangential[e]
-            for k in range(dim):
-                f = -cn * speed_n * wn[k] - ct * abs(s) * s * t[k]
-                force[r, e, k] += 0.5 * f
-                force[r, e + 1, k] += 0.5 * f
-            # ∂(edge force)/∂w = −[C_n·(|w_n|·P + w_n w_nᵀ/|w_n|) + 2·C_t·|s|·t tᵀ], P = I − t tᵀ
-            for a in range(dim):
-                for b in range(dim):
-                    projector = (1.0 if a == b else 0.0) - t[a] * t[b]
-                    value = cn * speed_n * projector + 2.0 * ct * abs(s) * t[a] * t[b]
-                    if speed_n > 0.0:
-                        value += cn * wn[a] * wn[b] / speed_n
-                    block[a, b] = value
-            # w = (v_e + v_{e+1})/2 and each node takes half the force: a factor ¼ on every node pair
-            _add_edge_block(band[r], stride, e, dim, block, 0.25 * velocity_derivative)
+    for e in range(n_nodes - 1):
+        _edge_tangent(positions, e, t)
+        s = 0.0
+        for k in range(dim):
+            w[k] = 0.5 * (velocities[e, k] + velocities[e + 1, k]) - current[k]
+            s += w[k] * t[k]
+        speed_n2 = 0.0
+        for k in range(dim):
+            wn[k] = w[k] - s * t[k]
+            speed_n2 += wn[k] * wn[k]
+        speed_n = math.sqrt(speed_n2)
+        cn = normal[e]
+        ct = tangential[e]
+        for k in range(dim):
+            f = -cn * speed_n * wn[k] - ct * abs(s) * s * t[k]
+            force[e, k] += 0.5 * f
+            force[e + 1, k] += 0.5 * f
+        # ∂(edge force)/∂w = −[C_n·(|w_n|·P + w_n w_nᵀ/|w_n|) + 2·C_t·|s|·t tᵀ], P = I − t tᵀ
+        for a in range(dim):
+            for b in range(dim):
+                projector = (1.0 if a == b else 0.0) - t[a] * t[b]
+                value = cn * speed_n * projector + 2.0 * ct * abs(s) * t[a] * t[b]
+                if speed_n > 0.0:
+                    value += cn * wn[a] * wn[b] / speed_n
+                block[a, b] = value
+        # w = (v_e + v_{e+1})/2 and each node takes half the force: a factor ¼ on every node pair
+        _add_edge_block(band, stride, e, dim, block, 0.25 * velocity_derivative)
 
 
 @njit(cache=True, error_model="numpy")
 def added_mass(start_positions, accelerations, edge_mass, acceleration_derivative, stride, force, band):
-    """Added-mass force −Σ ½·m_a·(I − t tᵀ)·a_node of every edge, with tangents at the start of the step; adds the
-    force to ``force`` (R, N, D) and ½·m_a·(I − t tᵀ)·∂a/∂q on the node blocks of ``band``."""
-    n_rods, n_nodes, dim = start_positions.shape
+    """Added-mass force −Σ ½·m_a·(I − t tᵀ)·a_node of every edge of one rod, with tangents at the start of the
+    step; adds the force to ``force`` (N, D) and ½·m_a·(I − t tᵀ)·∂a/∂q on the node blocks of ``band``."""
+    n_nodes, dim = start_positions.shape
     t = np.empty(dim)
     block = np.empty((dim, dim))
-    kd = band.shape[2] - 1
-    for r in range(n_rods):
-        for e in range(n_nodes - 1):
-            _edge_tangent(start_positions, r, e, t)
-            half = 0.5 * edge_mass[e]
+    kd = band.shape[1] - 1
+    for e in range(n_nodes - 1):
+        _edge_tangent(start_positions, e, t)
+        half = 0.5 * edge_mass[e]
+        for a in range(dim):
+            for b in range(dim):
+                block[a, b] = half * ((1.0 if a == b else 0.0) - t[a] * t[b])
+        for node in (e, e + 1):
             for a in range(dim):
+                f = 0.0
                 for b in range(dim):
-                    block[a, b] = half * ((1.0 if a == b else 0.0) - t[a] * t[b])
-            for node in (e, e + 1):
-                for a in range(dim):
-                    f = 0.0
-                    for b in range(dim):
-                        f -= block[a, b] * accelerations[r, node, b]
-                    force[r, node, a] += f
-                    row = stride * node + a
-                    for b in range(a + 1):
-                        band[r, row, kd - a + b] += acceleration_derivative * block[a, b]
+                    f -= block[a, b] * accelerations[node, b]
+                force[node, a] += f
+                row = stride * node + a
+                for b in range(a + 1):
+                    band[row, kd - a + b] += acceleration_derivative * block[a, b]
 
 
 def fluid_forces(medium: str) -> tuple[ForceModel, ...]:

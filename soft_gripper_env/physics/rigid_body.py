@@ -134,17 +134,9 @@ class BodyModel:
             jacobian = jacobian + (coefficient / dt)[:, None, None] * (
                 speed[..., None] * projector + part[:, :, None] * part[:, None, :] / safe[..., None])
         if self.palm_stiffness:
-            # the palm: k·overlap + critical damping 2·√(k·M)·v_z where the body rises above the disc; the body's
-            # highest end sphere counts
-            ends = [c + np.einsum("bij,bj->bi", orientation, end) for end in self.segment]
-            end = np.where((ends[0][:, 2] >= ends[1][:, 2])[:, None], ends[0], ends[1])
-            outside = np.maximum(np.hypot(end[:, 0], end[:, 1]) - self.palm_radius, 0.0)  # past the disc's rim
-            reach = np.sqrt(np.maximum(self.radius**2 - outside**2, 0.0))
-            top = end[:, 2] + reach
-            touching = (top > 0.0) & (outside < self.radius)
-            damping = 2.0 * np.sqrt(self.palm_stiffness * mass[:, 2, 2])
-            force[:, 2] -= touching * (self.palm_stiffness * top + damping * u[:, 2])
-            jacobian[:, 2, 2] += touching * (self.palm_stiffness + damping / dt)
+            push, stiffness = self._palm(c, u, orientation, mass[:, 2, 2], dt)
+            force[:, 2] -= push
+            jacobian[:, 2, 2] += stiffness
         inertia_new = orientation @ self.inertia @ orientation.transpose(0, 2, 1)
         inertia_old = orientation_old @ self.inertia @ orientation_old.transpose(0, 2, 1)
         momentum_change = (np.einsum("bij,bj->bi", inertia_new, theta / dt)
@@ -152,6 +144,30 @@ class BodyModel:
         residual = np.concatenate([np.einsum("bij,bj->bi", mass, c - c_old - dt * u_old) / dt**2 - force,
                                    momentum_change], axis=1)
         return residual, jacobian, inertia_new / dt**2
+
+
+    def palm_reaction(self, c, c_old, orientation, orientation_old, dt) -> np.ndarray:
+        """The force of each body on the palm [N], (B, 3), over a step from ``c_old`` to ``c`` of ``dt`` [s]."""
+        vertical_mass = self.mass + np.einsum("bi,bij,bj->b", orientation_old[:, 2], self.added_mass,
+                                              orientation_old[:, 2])
+        reaction = np.zeros_like(c)
+        if self.palm_stiffness:
+            reaction[:, 2] = self._palm(c, (c - c_old) / dt, orientation, vertical_mass, dt)[0]
+        return reaction
+
+    def _palm(self, c, u, orientation, vertical_mass, dt):
+        """The palm's push down on each body [N] (B,), k·overlap + critical damping 2·√(k·M)·v_z where the body
+        rises above the disc (its highest end sphere counts), and the push's derivative by the body's height over
+        the step [N/m], (B,)."""
+        ends = [c + np.einsum("bij,bj->bi", orientation, end) for end in self.segment]
+        end = np.where((ends[0][:, 2] >= ends[1][:, 2])[:, None], ends[0], ends[1])
+        outside = np.maximum(np.hypot(end[:, 0], end[:, 1]) - self.palm_radius, 0.0)  # past the disc's rim
+        reach = np.sqrt(np.maximum(self.radius**2 - outside**2, 0.0))
+        top = end[:, 2] + reach
+        touching = (top > 0.0) & (outside < self.radius)
+        damping = 2.0 * np.sqrt(self.palm_stiffness * vertical_mass)
+        return (touching * (self.palm_stiffness * top + damping * u[:, 2]),
+                touching * (self.palm_stiffness + damping / dt))
 
 
 def rotation_exp(theta: np.ndarray) -> np.ndarray:

@@ -248,15 +248,16 @@ def _cross_matrix_entry(a, i, j):
 
 
 @njit(cache=True, error_model="numpy")
-def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
-                  twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian):
-    """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 4) and ∇²E to ``band`` (R, 4N, 11).
+def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
+                      twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian):
+    """Elastic energy of one rod [J]; adds −∇E to ``force`` (N, 4) and ∇²E to ``band`` (4N, 11).
 
-    The start-of-step frames: ``tangent_old`` and ``director_old`` (R, N − 1, 3), ``ref_twist_old`` (R, N).
+    ``q`` (N, 4); the start-of-step frames: ``tangent_old`` and ``director_old`` (N − 1, 3), ``ref_twist_old`` (N);
+    ``natural_curvature`` κ̄ of the rod.
     """
-    n_rods, n_nodes = q.shape[0], q.shape[1]
+    n_nodes = q.shape[0]
     n_edges = n_nodes - 1
-    energy = np.zeros(n_rods)
+    energy = 0.0
     tangent = np.empty((n_edges, 3))
     d1 = np.empty((n_edges, 3))
     m1 = np.empty((n_edges, 3))
@@ -268,42 +269,54 @@ def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stre
     vectors = np.empty((3, 11))
     blocks = np.empty((3, 3, 3))
     stretch_hess = np.zeros((7, 7))
-    for r in range(n_rods):
-        qr = q[r]
-        rod_frames(qr, tangent_old[r], director_old[r], ref_twist_old[r], tangent, d1, ref_twist, m1, m2, lengths)
-        band_r = band[r]
-        for e in range(n_edges):
-            length = lengths[e]
-            t = _row(tangent, e)
-            l0 = rest_length[e]
-            ea = stretch_stiffness[e]
-            tension = ea * (length / l0 - 1.0)
-            energy[r] += 0.5 * ea * l0 * (length / l0 - 1.0) ** 2
-            for k in range(3):
-                force[r, e, k] += tension * t[k]
-                force[r, e + 1, k] -= tension * t[k]
-            if accumulate_hessian:
-                axial = ea / l0
-                lateral = tension / length
-                for i in range(3):
-                    for j in range(3):
-                        kij = (axial - lateral) * t[i] * t[j] + (lateral if i == j else 0.0)
-                        stretch_hess[i, j] = kij
-                        stretch_hess[4 + i, 4 + j] = kij
-                        stretch_hess[i, 4 + j] = -kij
-                        stretch_hess[4 + i, j] = -kij
-                scatter_contiguous(band_r, 4 * e, stretch_hess, 7)
-        for i in range(1, n_edges):
-            e = i - 1
-            twist = qr[i, 3] - qr[e, 3] + ref_twist[i]
-            energy[r] += _bend_twist(_row(tangent, e), _row(tangent, i), lengths[e], lengths[i], _row(m1, e),
-                                     _row(m2, e), _row(m1, i), _row(m2, i), twist, natural_curvature[r],
-                                     bend_stiffness[i] / voronoi_length[i], twist_stiffness[i] / voronoi_length[i],
-                                     grad, hess, vectors, blocks, accumulate_hessian)
-            for a in range(11):
-                force[r, e + a // 4, a % 4] -= grad[a]
-            if accumulate_hessian:
-                scatter_contiguous(band_r, 4 * e, hess, 11)
+    rod_frames(q, tangent_old, director_old, ref_twist_old, tangent, d1, ref_twist, m1, m2, lengths)
+    for e in range(n_edges):
+        length = lengths[e]
+        t = _row(tangent, e)
+        l0 = rest_length[e]
+        ea = stretch_stiffness[e]
+        tension = ea * (length / l0 - 1.0)
+        energy += 0.5 * ea * l0 * (length / l0 - 1.0) ** 2
+        for k in range(3):
+            force[e, k] += tension * t[k]
+            force[e + 1, k] -= tension * t[k]
+        if accumulate_hessian:
+            axial = ea / l0
+            lateral = tension / length
+            for i in range(3):
+                for j in range(3):
+                    kij = (axial - lateral) * t[i] * t[j] + (lateral if i == j else 0.0)
+                    stretch_hess[i, j] = kij
+                    stretch_hess[4 + i, 4 + j] = kij
+                    stretch_hess[i, 4 + j] = -kij
+                    stretch_hess[4 + i, j] = -kij
+            scatter_contiguous(band, 4 * e, stretch_hess, 7)
+    for i in range(1, n_edges):
+        e = i - 1
+        twist = q[i, 3] - q[e, 3] + ref_twist[i]
+        energy += _bend_twist(_row(tangent, e), _row(tangent, i), lengths[e], lengths[i], _row(m1, e), _row(m2, e),
+                              _row(m1, i), _row(m2, i), twist, natural_curvature,
+                              bend_stiffness[i] / voronoi_length[i], twist_stiffness[i] / voronoi_length[i], grad,
+                              hess, vectors, blocks, accumulate_hessian)
+        for a in range(11):
+            force[e + a // 4, a % 4] -= grad[a]
+        if accumulate_hessian:
+            scatter_contiguous(band, 4 * e, hess, 11)
+    return energy
+
+
+@njit(cache=True, error_model="numpy")
+def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
+                  twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian):
+    """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 4) and ∇²E to ``band`` (R, 4N, 11).
+
+    The start-of-step frames: ``tangent_old`` and ``director_old`` (R, N − 1, 3), ``ref_twist_old`` (R, N).
+    """
+    energy = np.zeros(q.shape[0])
+    for r in range(q.shape[0]):
+        energy[r] = rod3d_elastic_rod(q[r], tangent_old[r], director_old[r], ref_twist_old[r], rest_length,
+                                      stretch_stiffness, bend_stiffness, twist_stiffness, voronoi_length,
+                                      natural_curvature[r], force[r], band[r], accumulate_hessian)
     return energy
 
 

@@ -30,10 +30,10 @@ from numba import njit
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _stretch(q, r, i, rest_length, stretch_stiffness, force, band, accumulate_hessian):
-    """Stretch energy of edge i of rod r; adds force and Hessian (DOFs of nodes i, i+1)."""
-    ex = q[r, i + 1, 0] - q[r, i, 0]
-    ez = q[r, i + 1, 1] - q[r, i, 1]
+def _stretch(q, i, rest_length, stretch_stiffness, force, band, accumulate_hessian):
+    """Stretch energy of edge i of one rod; adds force and Hessian (DOFs of nodes i, i+1)."""
+    ex = q[i + 1, 0] - q[i, 0]
+    ez = q[i + 1, 1] - q[i, 1]
     length = math.sqrt(ex * ex + ez * ez)
     tx = ex / length
     tz = ez / length
@@ -41,17 +41,17 @@ def _stretch(q, r, i, rest_length, stretch_stiffness, force, band, accumulate_he
     ea = stretch_stiffness[i]
     tension = ea * (length / l0 - 1.0)
     energy = 0.5 * ea * l0 * (length / l0 - 1.0) ** 2
-    force[r, i, 0] += tension * tx
-    force[r, i, 1] += tension * tz
-    force[r, i + 1, 0] -= tension * tx
-    force[r, i + 1, 1] -= tension * tz
+    force[i, 0] += tension * tx
+    force[i, 1] += tension * tz
+    force[i + 1, 0] -= tension * tx
+    force[i + 1, 1] -= tension * tz
     if accumulate_hessian:
         axial = ea / l0
         lateral = tension / length
         kxx = axial * tx * tx + lateral * (1.0 - tx * tx)
         kxz = (axial - lateral) * tx * tz
         kzz = axial * tz * tz + lateral * (1.0 - tz * tz)
-        band_r = band[r]
+        band_r = band
         kd = band_r.shape[1] - 1
         o = 2 * i
         # lower triangle of [[K, −K], [−K, K]] over (s, z) of nodes i, i+1
@@ -69,12 +69,12 @@ def _stretch(q, r, i, rest_length, stretch_stiffness, force, band, accumulate_he
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accumulate_hessian):
-    """Bending energy at interior node i of rod r; adds force and Hessian (DOFs of nodes i−1, i, i+1)."""
-    ex = q[r, i, 0] - q[r, i - 1, 0]
-    ez = q[r, i, 1] - q[r, i - 1, 1]
-    fx = q[r, i + 1, 0] - q[r, i, 0]
-    fz = q[r, i + 1, 1] - q[r, i, 1]
+def _bend(q, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accumulate_hessian):
+    """Bending energy at interior node i of one rod; adds force and Hessian (DOFs of nodes i−1, i, i+1)."""
+    ex = q[i, 0] - q[i - 1, 0]
+    ez = q[i, 1] - q[i - 1, 1]
+    fx = q[i + 1, 0] - q[i, 0]
+    fz = q[i + 1, 1] - q[i, 1]
     e2 = ex * ex + ez * ez
     f2 = fx * fx + fz * fz
     kappa = 2.0 * (ex * fz - ez * fx) / (math.sqrt(e2 * f2) + ex * fx + ez * fz)  # 2·tan(φ/2)
@@ -87,12 +87,12 @@ def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accum
     dkappa = 1.0 + 0.25 * kappa * kappa  # dκ/dφ
     energy = 0.5 * k * dk * dk
     g = k * dk * dkappa
-    force[r, i - 1, 0] -= g * gp0
-    force[r, i - 1, 1] -= g * gp1
-    force[r, i, 0] -= g * gp2
-    force[r, i, 1] -= g * gp3
-    force[r, i + 1, 0] -= g * gp4
-    force[r, i + 1, 1] -= g * gp5
+    force[i - 1, 0] -= g * gp0
+    force[i - 1, 1] -= g * gp1
+    force[i, 0] -= g * gp2
+    force[i, 1] -= g * gp3
+    force[i + 1, 0] -= g * gp4
+    force[i + 1, 1] -= g * gp5
     if accumulate_hessian:
         # ∂²θ/∂e² = [[2 e_s e_z, e_z² − e_s²], [e_z² − e_s², −2 e_s e_z]]/|e|⁴, stored as (ss, sz, zz);
         # φ = θ(f) − θ(e) couples nodes (0, 1) through e and (1, 2) through f.
@@ -102,7 +102,7 @@ def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accum
         hf0, hf1, hf2 = 2.0 * fx * fz / f4, (fz * fz - fx * fx) / f4, -2.0 * fx * fz / f4
         d2kappa = 0.5 * kappa * dkappa  # d²κ/dφ²
         outer_coeff = k * (dkappa * dkappa + dk * d2kappa)
-        band_r = band[r]
+        band_r = band
         kd = band_r.shape[1] - 1
         offset = 2 * (i - 1)
         # lower triangle of outer_coeff·∇φ∇φᵀ + g·∇²φ, row a, column b ≤ a, over (s, z) of nodes i−1, i, i+1
@@ -131,20 +131,32 @@ def _bend(q, r, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accum
 
 
 @njit(cache=True, error_model="numpy")
+def planar_elastic_rod(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_length, natural_curvature, force,
+                       band, accumulate_hessian):
+    """Elastic energy of one rod [J]; adds −∇E to ``force`` (N, 2) and ∇²E to ``band`` (2N, 6).
+
+    ``q`` (N, 2); ``natural_curvature`` κ̄ of the rod.
+    """
+    energy = 0.0
+    n_nodes = q.shape[0]
+    for i in range(n_nodes - 1):
+        energy += _stretch(q, i, rest_length, stretch_stiffness, force, band, accumulate_hessian)
+    for i in range(1, n_nodes - 1):
+        energy += _bend(q, i, bend_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian)
+    return energy
+
+
+@njit(cache=True, error_model="numpy")
 def planar_elastic(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_length, natural_curvature,
                    force, band, accumulate_hessian):
     """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 2) and ∇²E to ``band`` (R, 2N, 6).
 
     ``natural_curvature`` holds κ̄ per rod, (R,).
     """
-    n_rods, n_nodes = q.shape[0], q.shape[1]
-    energy = np.zeros(n_rods)
-    for r in range(n_rods):
-        for i in range(n_nodes - 1):
-            energy[r] += _stretch(q, r, i, rest_length, stretch_stiffness, force, band, accumulate_hessian)
-        for i in range(1, n_nodes - 1):
-            energy[r] += _bend(q, r, i, bend_stiffness, voronoi_length, natural_curvature[r], force, band,
-                               accumulate_hessian)
+    energy = np.zeros(q.shape[0])
+    for r in range(q.shape[0]):
+        energy[r] = planar_elastic_rod(q[r], rest_length, stretch_stiffness, bend_stiffness, voronoi_length,
+                                       natural_curvature[r], force[r], band[r], accumulate_hessian)
     return energy
 
 

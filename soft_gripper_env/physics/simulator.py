@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .assembly import assemble, newton_solve
 from .config import Scene
 from .contact import (
     PENETRATION_TOLERANCE,
@@ -32,10 +33,9 @@ from .contact import (
     within_reach,
 )
 from .discretization import Discretization
-from .forces import StepContext
+from .forces import ForceTerms
 from .hydrodynamics import Current, CurrentBatch, MorisonDrag, rod_water_velocity
 from .integrators import INTEGRATORS
-from .linalg import newton_iteration
 from .rigid_body import BodyModel, eliminate_rods, rotation_exp
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
@@ -133,7 +133,14 @@ class Simulator:
         self._all_rods = np.ones(self.n_rods, dtype=bool)
         self._no_shift = np.zeros((self.n_rods, self.disc.dim))
         self._first_free_node = 0 if scene.gripper.finger.clamp == "free" else 2
+        self._force_tolerance = self.disc.residual_scale[0]
+        """Newton's tolerance on a force DOF, relative_tolerance·EI/L² [N]."""
         self._structure = _structure(scene)
+        disc = self.disc
+        self._force_terms = ForceTerms.of(disc, scene.forces).arrays()
+        self._elastic = (disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness, disc.twist_stiffness,
+                         disc.voronoi_length)
+        self._no_frames = (np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))  # planar: none
         drag = [f for f in scene.forces if isinstance(f, MorisonDrag)]
         self._currents = CurrentBatch(B) if drag else None
         self._water_cache: tuple[float, np.ndarray | None] = (math.nan, None)
@@ -148,7 +155,7 @@ class Simulator:
             else:
                 projection = np.stack([directions, np.tile([0.0, 0.0, 1.0], (len(directions), 1))], axis=1)
             self._projection = np.tile(projection, (B, 1, 1))  # rod coordinates from world, (R, D, 3)
-            force_tolerance = self.disc.residual_scale[-1]  # a force DOF's: relative_tolerance·EI/L² [N]
+            force_tolerance = self._force_tolerance
             length = scene.gripper.finger.length
             self._body_tolerance = np.repeat([force_tolerance, force_tolerance * length], 3)  # [N], [N·m]
         elif obj is not None:
@@ -360,29 +367,20 @@ class Simulator:
         """Total force [N] on every DOF (R, N, S) and the band of −∂f/∂q (R, n, kd+1) at coordinates q, for a
         backward-Euler step of length ``dt`` from ``q_old`` with predictor ``q_pred`` = q_old + Δt·v_old."""
         disc = self.disc
-        R, N, S, D = q.shape[0], disc.n_nodes, disc.stride, disc.dim
-        force = np.zeros((R, N, S))
-        band = np.zeros((R, N * S, disc.band_width + 1))
-        if frames_old is None:
-            planar_elastic(q, disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness,
-                           disc.voronoi_length, kbar, force, band, hessian)
-        else:
-            rod3d_elastic(q, *frames_old, disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness,
-                          disc.twist_stiffness, disc.voronoi_length, kbar, force, band, hessian)
-        if self.scene.forces:
-            water = None if self._currents is None else self._rod_water_velocity(time)
-            ctx = StepContext(time=time, start_positions=q_old[..., :D], velocity_derivative=1.0 / dt,
-                              acceleration_derivative=1.0 / dt**2, water_velocity=water)
-            velocity = (q[..., :D] - q_old[..., :D]) / dt
-            acceleration = (q[..., :D] - q_pred[..., :D]) / dt**2
-            for model in self.scene.forces:
-                model.accumulate(disc, ctx, q[..., :D], velocity, acceleration, force[..., :D], band)
+        R = q.shape[0]
+        force = np.empty(q.shape)
+        band = np.empty((R, disc.n_dofs, disc.band_width + 1))
+        assemble(q, q_old, q_pred, kbar, self._water(time, R), dt, self._elastic, frames_old or self._no_frames,
+                 self._force_terms, hessian, force, band)
         return force, band
 
-    def _rod_water_velocity(self, time: float) -> np.ndarray:
-        """The current at every rod at ``time`` (R, D) [m/s], kept for the Newton iterations of a step."""
-        if self._water_cache[0] != time:
-            self._water_cache = (time, rod_water_velocity(self.disc, self._currents.at(time)))
+    def _water(self, time: float, n_rods: int) -> np.ndarray:
+        """The current at every rod at ``time`` (R, D) [m/s], kept for the Newton iterations of a step; still water
+        in a scene without drag."""
+        if self._water_cache[0] != time or len(self._water_cache[1]) != n_rods:
+            water = (np.zeros((n_rods, self.disc.dim)) if self._currents is None
+                     else rod_water_velocity(self.disc, self._currents.at(time)))
+            self._water_cache = (time, water)
         return self._water_cache[1]
 
     def _free_mask(self, held: np.ndarray) -> np.ndarray:
@@ -410,21 +408,14 @@ class Simulator:
         solution. Returns per-rod converged, iterations and residual ratio (R,), and the residual
         M·(q − q_pred)/Δt² − f at the solution (R, n): on held DOFs, the contact reaction."""
         disc = self.disc
-        R, n = q.shape[0], disc.n_dofs
-        mass_term = disc.dof_mass / dt**2
-        active = rods.copy()
+        R = q.shape[0]
         converged = np.zeros(R, dtype=bool)
         iterations = np.zeros(R, dtype=np.int64)
         ratio = np.full(R, np.inf)
-        max_iterations = self.scene.newton.max_iterations
-        q_flat, q_pred_flat = q.reshape(R, n), q_pred.reshape(R, n)
-        for it in range(max_iterations + 1):
-            force, band = self._assemble(q, q_old, q_pred, frames_old, kbar, time, dt)
-            if not newton_iteration(q_flat, q_pred_flat, force.reshape(R, n), band, mass_term,
-                                    self._newton_tolerance_inverse(dt), free, active, converged, iterations, ratio,
-                                    it < max_iterations):
-                break
-        residual = mass_term * (q_flat - q_pred_flat) - force.reshape(R, n)
+        residual = np.zeros((R, disc.n_dofs))
+        newton_solve(q, q_old, q_pred, kbar, self._water(time, R), dt, self._elastic, frames_old or self._no_frames,
+                     self._force_terms, disc.band_width, disc.dof_mass / dt**2, self._newton_tolerance_inverse(dt),
+                     free, rods, self.scene.newton.max_iterations, converged, iterations, ratio, residual)
         return converged, iterations, ratio, residual
 
     def _contact_changes(self, q, q_old, residual, held, starts, ends, radii, searched, shift, hold_at):
@@ -434,15 +425,30 @@ class Simulator:
         reaction = residual.reshape(R, N, S)[..., :D] * held[..., None]
         outward = q[..., :D] - closest_points(q[..., :D], starts, ends)
         normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
-        adhesive = held & (normal_reaction < 0.0)
+        # a reaction is known to Newton's tolerance: one pulling by less is zero, and releasing it would only cycle
+        adhesive = held & (normal_reaction < -self._force_tolerance)
         new_hold = np.zeros((R, N), dtype=bool)
         found = find_penetrations(q[..., :D], q_old[..., :D], shift, starts, ends, radii, held, searched,
                                   self._first_free_node, PENETRATION_TOLERANCE, new_hold, hold_at)
         return adhesive, new_hold, adhesive.any(axis=1) | (found > 0)
 
+    def _next_holds(self, k, held, adhesive, new_hold, changed):
+        """The corrector's decision after solve ``k``: the holds of the next solve (R, N) and the rods to solve
+        again (R,), or None to stop. Within the budget, new penetrations are held and adhesive holds released. When
+        the budget is spent with nodes still inside the object, one last solve holds them and releases nothing: a
+        hold that pulls for one step is a smaller error than a node left inside the object, from which the next step
+        may not recover (the step reports resolved = False either way)."""
+        budget = self.scene.contact.max_corrector_iterations
+        if not changed.any() or k > budget or (k == budget and not new_hold.any()):
+            return None
+        if k == budget:
+            return held | new_hold, new_hold.any(axis=1)
+        return (held & ~adhesive) | new_hold, changed
+
     def _solve_with_contact(self, state, q_start, q_old, q_pred, frames_old, kbar, dt):
         """The predictor–corrector (see :mod:`.contact`): solve, release adhesive holds, hold new penetrations, and
-        solve the rods that changed again, until none does or the corrector's budget is spent."""
+        solve the rods that changed again (each from its last solution), until none does or the corrector's budget is
+        spent."""
         disc = self.disc
         R, N, D = self.n_rods, disc.n_nodes, disc.dim
         held = state.held.reshape(R, N).copy() if state.held is not None else np.zeros((R, N), dtype=bool)
@@ -455,19 +461,18 @@ class Simulator:
         corrector = np.zeros(R, dtype=np.int64)
         rods = self._all_rods
         starts, ends, radii, searched = self._object
-        for k in range(self.scene.contact.max_corrector_iterations + 1):
-            q[rods] = q_start[rods]
-            q[..., :D][held & rods[:, None]] = hold_at[held & rods[:, None]]
+        for k in range(self.scene.contact.max_corrector_iterations + 2):
+            q[..., :D][held & rods[:, None]] = hold_at[held & rods[:, None]]  # from the last solution, warm
             solved = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt, self._free_mask(held), rods)
             for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
                 total[rods] = part[rods]
             adhesive, new_hold, changed = self._contact_changes(q, q_old, residual, held, starts, ends, radii,
                                                                 searched, self._no_shift, hold_at)
-            if not changed.any() or k == self.scene.contact.max_corrector_iterations:
+            update = self._next_holds(k, held, adhesive, new_hold, changed)
+            if update is None:
                 break
-            held = (held & ~adhesive) | new_hold
-            corrector[changed] += 1
-            rods = changed
+            held, rods = update
+            corrector[rods] += 1
         return q, held, changed, corrector, converged, iterations, ratio, residual
 
     def _body_in_rod_frames(self, centers: np.ndarray,
@@ -488,7 +493,10 @@ class Simulator:
     def _solve_with_body(self, state, q_start, q_old, q_pred, frames_old, kbar, dt):
         """Predictor–corrector contact with a free sphere: each solve moves rods and body together
         (:meth:`_newton_with_body`); new penetrations are held where they entered the body's surface, with their
-        offset in the body's frame, and adhesive holds are released, until nothing changes."""
+        offset in the body's frame, and adhesive holds are released, until nothing changes. Each re-solve starts from
+        the last solution, so Newton starts a few penetration depths from the new one; restarting from the predictor
+        would start a hold far from a body that the impact has slowed, a jump the 3-D coupled solve did not always
+        survive."""
         disc = self.disc
         R, N, D = self.n_rods, disc.n_nodes, disc.dim
         B, F = self.batch_size, self.n_fingers
@@ -504,16 +512,15 @@ class Simulator:
         ratio = np.full(R, np.inf)
         residual = np.zeros((R, disc.n_dofs))
         grippers = np.ones(B, dtype=bool)  # solved again: all at first, then those whose contacts changed
-        for k in range(self.scene.contact.max_corrector_iterations + 1):
+        for k in range(self.scene.contact.max_corrector_iterations + 2):
             rods = np.repeat(grippers, F)
             if grippers.all():
-                q[:], c[:], theta[:] = q_start, c_start, theta_start
                 solved = self._newton_with_body(q, q_old, q_pred, frames_old, kbar, state.time, dt, held, offsets,
                                                 body_old, c, theta, grippers)
             else:  # only the grippers whose contacts changed, as a batch of their own: cost ∝ their number
                 index = np.nonzero(grippers)[0]
                 sub = self._subsimulator(index)
-                q_sub, c_sub, theta_sub = q_start[rods], c_start[index], theta_start[index]
+                q_sub, c_sub, theta_sub = q[rods], c[index], theta[index]
                 frames_sub = None if frames_old is None else tuple(f[rods] for f in frames_old)
                 solved = sub._newton_with_body(q_sub, q_old[rods], q_pred[rods], frames_sub, kbar[rods], state.time,
                                                dt, held[rods], offsets[rods], tuple(b[index] for b in body_old),
@@ -528,7 +535,8 @@ class Simulator:
             searched = within_reach(starts, ends, radii, self.scene.gripper.finger.length)
             adhesive, new_hold, changed = self._contact_changes(q, q_old, residual, held, starts, ends, radii,
                                                                 searched, shift, hold_at)
-            if not changed.any() or k == self.scene.contact.max_corrector_iterations:
+            update = self._next_holds(k, held, adhesive, new_hold, changed)
+            if update is None:
                 break
             # the offset of a new hold, in the body's frame at the end of this solve
             world = np.einsum("rdj,rnd->rnj", self._projection, hold_at)  # rod coordinates back to world
@@ -536,9 +544,9 @@ class Simulator:
             rod_position = np.repeat(position, F, axis=0)
             new_offsets = np.einsum("rji,rnj->rni", rod_orientation, world - rod_position[:, None, :])
             offsets[new_hold] = new_offsets[new_hold]
-            held = (held & ~adhesive) | new_hold
-            corrector[changed] += 1
-            grippers = changed.reshape(B, F).any(axis=1)
+            held, again = update
+            corrector[again] += 1
+            grippers = again.reshape(B, F).any(axis=1)
         return (q, held, changed, corrector, converged, iterations, ratio, residual,
                 (offsets, position, (position - body_old[0]) / dt, orientation, theta / dt))
 
@@ -700,7 +708,9 @@ class Simulator:
                 reaction=disc.world_positions(reaction.reshape(B, F, N, S)),
                 normal_reaction=np.sum(reaction[..., :D] * outward, axis=-1).reshape(B, F, N),
                 corrector_iterations=corrector.reshape(B, F).max(axis=1),
-                resolved=~changed.reshape(B, F).any(axis=1))
+                resolved=~changed.reshape(B, F).any(axis=1),
+                palm_reaction=None if body is None else self._body.palm_reaction(
+                    body[1], state.body_position, body[3], state.body_orientation, dt))
         ratio = np.where(np.isnan(ratio), np.inf, ratio)
         return StepResult(state=new_state, converged=converged.reshape(B, F).all(axis=1),
                           newton_iterations=iterations.reshape(B, F).max(axis=1),

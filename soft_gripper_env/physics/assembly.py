@@ -1,0 +1,152 @@
+"""The compiled assembly of the implicit system, and Newton's method for rods that move on their own.
+
+One rod's Newton matrix and residual come from :func:`assemble_rod`: the elastic forces of the planar or 3-D rod
+and the scene's :class:`~.forces.ForceTerms`, at coordinates q of a backward-Euler step of Δt from q_old with the
+predictor q_pred = q_old + Δt·v_old. :func:`newton_solve` runs the whole Newton loop of every rod in one call, so a
+step costs one kernel call instead of a few dozen array operations per iteration; :func:`assemble` gives the
+batch's forces and bands to the body-coupled solve (:mod:`.rigid_body`), which iterates in Python.
+
+The arguments shared by these kernels:
+
+=====================  ===========================================================================  ===========
+name                   meaning                                                                      shape
+=====================  ===========================================================================  ===========
+``q``                  coordinates (positions [m], twist angles [rad])                              (R, N, S)
+``natural_curvature``  κ̄ per rod (dimensionless)                                                    (R,)
+``water``              the water's velocity at every rod, in its coordinates [m/s]                  (R, D)
+``elastic``            rest edge length [m], EA [N], EI [N·m²], GJ [N·m²], Voronoi length [m]       5 arrays
+``frames``             start-of-step tangent, director (R, N − 1, 3) and reference twist (R, N);   3 arrays
+                       empty arrays in the planar model
+``terms``              :meth:`~.forces.ForceTerms.arrays`                                           5 arrays
+=====================  ===========================================================================  ===========
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .forces import linear_damping
+from .hydrodynamics import added_mass, morison_drag
+from .linalg import solve_banded_symmetric_rod
+from .rod_3d import rod3d_elastic_rod
+from .rod_planar import planar_elastic_rod
+
+
+@njit(cache=True, error_model="numpy")
+def external_forces_rod(positions, start_positions, velocities, accelerations, water, terms, velocity_derivative,
+                        acceleration_derivative, stride, force, band):
+    """Adds the force terms' force [N] to one rod's ``force`` (N, ≥D) and their negated Jacobian to its ``band``.
+    ``positions``, ``start_positions``, ``velocities``, ``accelerations``: (N, D); ``water`` (D,)."""
+    node_force, damping, drag_normal, drag_tangential, edge_added_mass = terms
+    n_nodes, dim = positions.shape
+    if node_force.size:
+        for i in range(n_nodes):
+            for k in range(dim):
+                force[i, k] += node_force[i, k]
+    if damping.size:
+        linear_damping(damping, velocities, velocity_derivative, stride, force, band)
+    if drag_normal.size:
+        morison_drag(positions, velocities, water, drag_normal, drag_tangential, velocity_derivative, stride, force,
+                     band)
+    if edge_added_mass.size:
+        added_mass(start_positions, accelerations, edge_added_mass, acceleration_derivative, stride, force, band)
+
+
+@njit(cache=True, error_model="numpy")
+def external_forces(positions, start_positions, velocities, accelerations, water, terms, velocity_derivative,
+                    acceleration_derivative, stride, force, band):
+    """:func:`external_forces_rod` for every rod: arrays (R, N, D), ``water`` (R, D), ``band`` (R, n, kd+1)."""
+    for r in range(positions.shape[0]):
+        external_forces_rod(positions[r], start_positions[r], velocities[r], accelerations[r], water[r], terms,
+                            velocity_derivative, acceleration_derivative, stride, force[r], band[r])
+
+
+@njit(cache=True, error_model="numpy")
+def assemble_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, hessian, force, band,
+                 velocity, acceleration):
+    """Overwrites ``force`` (N, S) with rod r's total force [N] and ``band`` (n, kd+1) with −∂f/∂q; ``velocity`` and
+    ``acceleration`` (N, D) are scratch. Returns its elastic energy [J]."""
+    force[:] = 0.0
+    band[:] = 0.0
+    stride = q.shape[2]
+    rest_length, stretch_stiffness, bend_stiffness, twist_stiffness, voronoi_length = elastic
+    if stride == 2:
+        energy = planar_elastic_rod(q[r], rest_length, stretch_stiffness, bend_stiffness, voronoi_length,
+                                    natural_curvature[r], force, band, hessian)
+    else:
+        energy = rod3d_elastic_rod(q[r], frames[0][r], frames[1][r], frames[2][r], rest_length, stretch_stiffness,
+                                   bend_stiffness, twist_stiffness, voronoi_length, natural_curvature[r], force,
+                                   band, hessian)
+    n_nodes, dim = velocity.shape
+    for i in range(n_nodes):
+        for k in range(dim):
+            velocity[i, k] = (q[r, i, k] - q_old[r, i, k]) / dt
+            acceleration[i, k] = (q[r, i, k] - q_pred[r, i, k]) / (dt * dt)
+    external_forces_rod(q[r, :, :dim], q_old[r, :, :dim], velocity, acceleration, water[r], terms, 1.0 / dt,
+                        1.0 / (dt * dt), stride, force, band)
+    return energy
+
+
+@njit(cache=True, error_model="numpy")
+def assemble(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, hessian, force, band):
+    """Every rod's force (R, N, S) [N] and −∂f/∂q (R, n, kd+1), written into ``force`` and ``band``."""
+    dim = water.shape[1]
+    velocity = np.empty((q.shape[1], dim))
+    acceleration = np.empty((q.shape[1], dim))
+    for r in range(q.shape[0]):
+        assemble_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, hessian, force[r],
+                     band[r], velocity, acceleration)
+
+
+@njit(cache=True, error_model="numpy")
+def newton_solve(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, band_width, mass_term,
+                 tolerance_inverse, free, rods, max_iterations, converged, iterations, ratio, residual):
+    """Newton's method for every rod where ``rods`` is True, each on its own until it converges.
+
+    ``q`` (R, N, S) holds the start and receives the solution; only DOFs where ``free`` (R, n) is True move. With
+    the residual r = M·(q − q_pred)/Δt² − f (``mass_term`` = M/Δt² per DOF, (n,)), a rod has converged when its
+    largest |r|·``tolerance_inverse`` (R, n) over free DOFs is ≤ 1. Writes per rod ``converged``, ``iterations``
+    (linear solves) and that ``ratio`` (R,), and the final ``residual`` (R, n): on held DOFs, the contact reaction.
+    A rod whose factorisation fails stops with ratio inf and NaN coordinates.
+    """
+    n_rods, n_nodes, stride = q.shape
+    n = n_nodes * stride
+    dim = water.shape[1]
+    force = np.empty((n_nodes, stride))
+    band = np.empty((n, band_width + 1))
+    velocity = np.empty((n_nodes, dim))
+    acceleration = np.empty((n_nodes, dim))
+    step = np.empty(n)
+    for r in range(n_rods):
+        if not rods[r]:
+            continue
+        converged[r] = False
+        iterations[r] = 0
+        q_r = q[r].reshape(n)
+        q_pred_r = q_pred[r].reshape(n)
+        for it in range(max_iterations + 1):
+            assemble_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, True, force,
+                         band, velocity, acceleration)
+            force_r = force.reshape(n)
+            largest = 0.0
+            for j in range(n):
+                residual[r, j] = mass_term[j] * (q_r[j] - q_pred_r[j]) - force_r[j]
+                step[j] = -residual[r, j]
+                scaled = abs(residual[r, j]) * tolerance_inverse[r, j] if free[r, j] else 0.0
+                if not scaled <= largest:  # also catches NaN
+                    largest = scaled
+            ratio[r] = largest
+            if largest <= 1.0:
+                converged[r] = True
+                break
+            if it == max_iterations:
+                break
+            for j in range(n):
+                band[j, band_width] += mass_term[j]
+            if not solve_banded_symmetric_rod(band, step, free[r]):
+                ratio[r] = np.inf
+                break
+            for j in range(n):
+                q_r[j] += step[j]
+            iterations[r] += 1
