@@ -100,6 +100,45 @@ def assemble(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, te
 
 
 @njit(cache=True, error_model="numpy")
+def newton_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, mass_term,
+               tolerance_inverse, free, max_iterations, converged, iterations, ratio, residual, force, band, velocity,
+               acceleration, step):
+    """Newton's method for rod r (see :func:`newton_solve`); ``force``, ``band``, ``velocity``, ``acceleration`` and
+    ``step`` are scratch."""
+    n = step.size
+    band_width = band.shape[1] - 1
+    converged[r] = False
+    iterations[r] = 0
+    q_r = q[r].reshape(n)
+    q_pred_r = q_pred[r].reshape(n)
+    force_r = force.reshape(n)
+    for it in range(max_iterations + 1):
+        assemble_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, True, force, band,
+                     velocity, acceleration)
+        largest = 0.0
+        for j in range(n):
+            residual[r, j] = mass_term[j] * (q_r[j] - q_pred_r[j]) - force_r[j]
+            step[j] = -residual[r, j]
+            scaled = abs(residual[r, j]) * tolerance_inverse[r, j] if free[r, j] else 0.0
+            if not scaled <= largest:  # also catches NaN
+                largest = scaled
+        ratio[r] = largest
+        if largest <= 1.0:
+            converged[r] = True
+            return
+        if it == max_iterations:
+            return
+        for j in range(n):
+            band[j, band_width] += mass_term[j]
+        if not solve_banded_symmetric_rod(band, step, free[r]):
+            ratio[r] = np.inf
+            return
+        for j in range(n):
+            q_r[j] += step[j]
+        iterations[r] += 1
+
+
+@njit(cache=True, error_model="numpy")
 def newton_solve(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, band_width, mass_term,
                  tolerance_inverse, free, rods, max_iterations, converged, iterations, ratio, residual):
     """Newton's method for every rod where ``rods`` is True, each on its own until it converges.
@@ -111,42 +150,52 @@ def newton_solve(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames
     A rod whose factorisation fails stops with ratio inf and NaN coordinates.
     """
     n_rods, n_nodes, stride = q.shape
-    n = n_nodes * stride
     dim = water.shape[1]
     force = np.empty((n_nodes, stride))
-    band = np.empty((n, band_width + 1))
+    band = np.empty((n_nodes * stride, band_width + 1))
     velocity = np.empty((n_nodes, dim))
     acceleration = np.empty((n_nodes, dim))
-    step = np.empty(n)
+    step = np.empty(n_nodes * stride)
     for r in range(n_rods):
-        if not rods[r]:
-            continue
-        converged[r] = False
-        iterations[r] = 0
-        q_r = q[r].reshape(n)
-        q_pred_r = q_pred[r].reshape(n)
-        for it in range(max_iterations + 1):
-            assemble_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, True, force,
-                         band, velocity, acceleration)
-            force_r = force.reshape(n)
-            largest = 0.0
-            for j in range(n):
-                residual[r, j] = mass_term[j] * (q_r[j] - q_pred_r[j]) - force_r[j]
-                step[j] = -residual[r, j]
-                scaled = abs(residual[r, j]) * tolerance_inverse[r, j] if free[r, j] else 0.0
-                if not scaled <= largest:  # also catches NaN
-                    largest = scaled
-            ratio[r] = largest
-            if largest <= 1.0:
-                converged[r] = True
-                break
-            if it == max_iterations:
-                break
-            for j in range(n):
-                band[j, band_width] += mass_term[j]
-            if not solve_banded_symmetric_rod(band, step, free[r]):
-                ratio[r] = np.inf
-                break
-            for j in range(n):
-                q_r[j] += step[j]
-            iterations[r] += 1
+        if rods[r]:
+            newton_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, mass_term,
+                       tolerance_inverse, free, max_iterations, converged, iterations, ratio, residual, force, band,
+                       velocity, acceleration, step)
+
+
+@njit(cache=True, error_model="numpy")
+def predict(q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
+    """The predictor q_pred = q_old + Δt·v_old, and Newton's start q_pred + Δt²·a_old, the last step's motion
+    extrapolated (``acceleration_old`` empty: the predictor itself). Arrays (R, N, S)."""
+    extrapolate = acceleration_old.size > 0
+    for r in range(q_old.shape[0]):
+        for i in range(q_old.shape[1]):
+            for k in range(q_old.shape[2]):
+                q_pred[r, i, k] = q_old[r, i, k] + dt * velocity_old[r, i, k]
+                q_start[r, i, k] = q_pred[r, i, k] + (dt * dt * acceleration_old[r, i, k] if extrapolate else 0.0)
+
+
+@njit(cache=True, error_model="numpy")
+def finish(q, q_old, velocity_old, dt, velocity, acceleration):
+    """The end of a backward-Euler step: v = (q − q_old)/Δt and the mean acceleration (v − v_old)/Δt."""
+    for r in range(q.shape[0]):
+        for i in range(q.shape[1]):
+            for k in range(q.shape[2]):
+                velocity[r, i, k] = (q[r, i, k] - q_old[r, i, k]) / dt
+                acceleration[r, i, k] = (velocity[r, i, k] - velocity_old[r, i, k]) / dt
+
+
+@njit(cache=True, error_model="numpy")
+def per_gripper(converged, iterations, ratio, n_fingers):
+    """A step's per-rod Newton results (R,) per gripper (B,): whether every finger converged, the most iterations,
+    and the largest residual ratio (NaN read as inf)."""
+    n_grippers = converged.size // n_fingers
+    all_converged = np.ones(n_grippers, dtype=np.bool_)
+    most = np.zeros(n_grippers, dtype=np.int64)
+    largest = np.zeros(n_grippers)
+    for b in range(n_grippers):
+        for r in range(b * n_fingers, (b + 1) * n_fingers):
+            all_converged[b] &= converged[r]
+            most[b] = max(most[b], iterations[r])
+            largest[b] = max(largest[b], np.inf if np.isnan(ratio[r]) else ratio[r])
+    return all_converged, most, largest

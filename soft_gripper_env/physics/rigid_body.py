@@ -38,6 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
+from .assembly import assemble_rod
 from .forces import Buoyancy, Gravity
 from .hydrodynamics import AddedMass, MorisonDrag
 from .linalg import factor_banded_symmetric, solve_factored
@@ -46,6 +47,8 @@ SPHERE_DRAG_COEFFICIENT = 0.47
 """C_d of a sphere at Re ≈ 10³–10⁵ (dimensionless)."""
 SPHERE_ADDED_MASS_COEFFICIENT = 0.5
 """C_a of a sphere (dimensionless): its added mass is half the displaced fluid's."""
+MAX_STEP_HALVINGS = 6
+"""How often the coupled Newton solve may halve a step that made its residual worse (a backtracking line search)."""
 
 
 class BodyModel:
@@ -110,77 +113,160 @@ class BodyModel:
         self.segment[0][index] = start - center
         self.segment[1][index] = end - center
 
-    def residual(self, c, c_old, u_old, theta, w_old, orientation, orientation_old, dt, water_velocity):
-        """The body's own residual (B, 6) (inertia minus external loads), and the diagonal blocks of its Jacobian
-        for translation and rotation, (B, 3, 3) each. ``orientation`` is the end-of-step R, (B, 3, 3);
-        ``water_velocity`` the current at each body (B, 3) [m/s]."""
-        u = (c - c_old) / dt
-        # translational inertia with the start-of-step orientation, as for the rods' added mass
-        mass = self.mass[:, None, None] * np.eye(3) + orientation_old @ self.added_mass @ orientation_old.transpose(
-            0, 2, 1)
-        force = np.zeros_like(c)
-        force[:, 2] -= self.weight
-        jacobian = mass / dt**2
-        w = u - water_velocity
-        axis = np.einsum("bij,bj->bi", orientation, self.axis)
-        for coefficient, normal_only in ((self.isotropic_drag, False), (self.normal_drag, True)):
-            if not coefficient.any():
-                continue
-            part = w - np.sum(w * axis, axis=1, keepdims=True) * axis if normal_only else w
-            speed = np.linalg.norm(part, axis=1, keepdims=True)
-            force -= coefficient[:, None] * speed * part
-            projector = np.eye(3) - axis[:, :, None] * axis[:, None, :] if normal_only else np.eye(3)
-            safe = np.where(speed > 0, speed, 1.0)
-            jacobian = jacobian + (coefficient / dt)[:, None, None] * (
-                speed[..., None] * projector + part[:, :, None] * part[:, None, :] / safe[..., None])
-        if self.palm_stiffness:
-            push, stiffness = self._palm(c, u, orientation, mass[:, 2, 2], dt)
-            force[:, 2] -= push
-            jacobian[:, 2, 2] += stiffness
-        inertia_new = orientation @ self.inertia @ orientation.transpose(0, 2, 1)
-        inertia_old = orientation_old @ self.inertia @ orientation_old.transpose(0, 2, 1)
-        momentum_change = (np.einsum("bij,bj->bi", inertia_new, theta / dt)
-                           - np.einsum("bij,bj->bi", inertia_old, w_old)) / dt
-        residual = np.concatenate([np.einsum("bij,bj->bi", mass, c - c_old - dt * u_old) / dt**2 - force,
-                                   momentum_change], axis=1)
-        return residual, jacobian, inertia_new / dt**2
-
+    def arrays(self) -> tuple:
+        """The bodies' arrays in the order the compiled kernels take them: mass, inertia, added mass, weight, normal
+        and isotropic drag, axis, the segment's two ends, radius; then the palm's stiffness and radius."""
+        return ((self.mass, self.inertia, self.added_mass, self.weight, self.normal_drag, self.isotropic_drag,
+                 self.axis, self.segment[0], self.segment[1], self.radius),
+                (float(self.palm_stiffness), float(self.palm_radius)))
 
     def palm_reaction(self, c, c_old, orientation, orientation_old, dt) -> np.ndarray:
         """The force of each body on the palm [N], (B, 3), over a step from ``c_old`` to ``c`` of ``dt`` [s]."""
-        vertical_mass = self.mass + np.einsum("bi,bij,bj->b", orientation_old[:, 2], self.added_mass,
-                                              orientation_old[:, 2])
         reaction = np.zeros_like(c)
-        if self.palm_stiffness:
-            reaction[:, 2] = self._palm(c, (c - c_old) / dt, orientation, vertical_mass, dt)[0]
+        palm_reactions(*self.arrays(), c, c_old, orientation, orientation_old, dt, reaction)
         return reaction
 
-    def _palm(self, c, u, orientation, vertical_mass, dt):
-        """The palm's push down on each body [N] (B,), k·overlap + critical damping 2·√(k·M)·v_z where the body
-        rises above the disc (its highest end sphere counts), and the push's derivative by the body's height over
-        the step [N/m], (B,)."""
-        ends = [c + np.einsum("bij,bj->bi", orientation, end) for end in self.segment]
-        end = np.where((ends[0][:, 2] >= ends[1][:, 2])[:, None], ends[0], ends[1])
-        outside = np.maximum(np.hypot(end[:, 0], end[:, 1]) - self.palm_radius, 0.0)  # past the disc's rim
-        reach = np.sqrt(np.maximum(self.radius**2 - outside**2, 0.0))
-        top = end[:, 2] + reach
-        touching = (top > 0.0) & (outside < self.radius)
-        damping = 2.0 * np.sqrt(self.palm_stiffness * vertical_mass)
-        return (touching * (self.palm_stiffness * top + damping * u[:, 2]),
-                touching * (self.palm_stiffness + damping / dt))
+
+@njit(cache=True, error_model="numpy")
+def _translational_mass(b, body, orientation_old, mass):
+    """Mass plus added mass of body b in the world frame, m·I + R_old·A·R_oldᵀ [kg], into ``mass`` (3, 3)."""
+    added = body[2]
+    for i in range(3):
+        for j in range(3):
+            total = body[0][b] if i == j else 0.0
+            for k in range(3):
+                for m in range(3):
+                    total += orientation_old[b, i, k] * added[b, k, m] * orientation_old[b, j, m]
+            mass[i, j] = total
+
+
+@njit(cache=True, error_model="numpy")
+def _palm_push(b, body, palm, c, vertical_velocity, orientation, vertical_mass, dt):
+    """The palm's push down on body b [N], k·overlap + critical damping 2·√(k·M)·v_z where the body rises above
+    the disc (its highest end sphere counts), and the push's derivative by the body's height over the step [N/m].
+    ``orientation`` (3, 3)."""
+    stiffness, palm_radius = palm
+    if stiffness == 0.0:
+        return 0.0, 0.0
+    radius = body[9][b]
+    top_end = np.empty(3)
+    highest = -np.inf
+    for segment in (body[7], body[8]):
+        end = np.empty(3)
+        for i in range(3):
+            end[i] = c[b, i] + orientation[i, 0] * segment[b, 0] + orientation[i, 1] * segment[b, 1] \
+                + orientation[i, 2] * segment[b, 2]
+        if end[2] > highest:
+            highest = end[2]
+            top_end[:] = end
+    outside = max(math.hypot(top_end[0], top_end[1]) - palm_radius, 0.0)  # past the disc's rim
+    top = top_end[2] + math.sqrt(max(radius * radius - outside * outside, 0.0))
+    if not (top > 0.0 and outside < radius):
+        return 0.0, 0.0
+    damping = 2.0 * math.sqrt(stiffness * vertical_mass)
+    return stiffness * top + damping * vertical_velocity, stiffness + damping / dt
+
+
+@njit(cache=True, error_model="numpy")
+def palm_reactions(body, palm, c, c_old, orientation, orientation_old, dt, reaction):
+    """Writes the force of every body on the palm (B, 3) [N] into ``reaction``."""
+    mass = np.empty((3, 3))
+    for b in range(c.shape[0]):
+        _translational_mass(b, body, orientation_old, mass)
+        reaction[b, 2] = _palm_push(b, body, palm, c, (c[b, 2] - c_old[b, 2]) / dt, orientation[b], mass[2, 2],
+                                    dt)[0]
+
+
+@njit(cache=True, error_model="numpy")
+def body_residual(b, body, palm, c, theta, body_old, orientation, dt, water, residual, matrix):
+    """Body b's own residual (6,) (inertia minus external loads) into ``residual``, and the diagonal blocks of its
+    Jacobian, translation and rotation, into ``matrix`` (6, 6). ``orientation`` (3, 3) is the end-of-step R;
+    ``water`` (B, 3) the current at each body [m/s]."""
+    c_old, u_old, orientation_old, w_old = body_old
+    inertia, weight, normal_drag, isotropic_drag, axis_body = body[1], body[3], body[4], body[5], body[6]
+    mass = np.empty((3, 3))
+    _translational_mass(b, body, orientation_old, mass)  # with the start-of-step orientation, as the rods' added mass
+    u = np.empty(3)
+    w = np.empty(3)
+    axis = np.empty(3)
+    part = np.empty(3)
+    force = np.zeros(3)
+    force[2] = -weight[b]
+    matrix[:, :] = 0.0
+    for i in range(3):
+        u[i] = (c[b, i] - c_old[b, i]) / dt
+        w[i] = u[i] - water[b, i]
+        axis[i] = orientation[i, 0] * axis_body[b, 0] + orientation[i, 1] * axis_body[b, 1] \
+            + orientation[i, 2] * axis_body[b, 2]
+        for j in range(3):
+            matrix[i, j] = mass[i, j] / (dt * dt)
+    along = w[0] * axis[0] + w[1] * axis[1] + w[2] * axis[2]
+    for normal_only in (False, True):
+        coefficient = normal_drag[b] if normal_only else isotropic_drag[b]
+        if coefficient == 0.0:
+            continue
+        for i in range(3):
+            part[i] = w[i] - along * axis[i] if normal_only else w[i]
+        speed = math.sqrt(part[0] ** 2 + part[1] ** 2 + part[2] ** 2)
+        safe = speed if speed > 0.0 else 1.0
+        for i in range(3):
+            force[i] -= coefficient * speed * part[i]
+            for j in range(3):
+                projector = (1.0 if i == j else 0.0) - (axis[i] * axis[j] if normal_only else 0.0)
+                matrix[i, j] += coefficient / dt * (speed * projector + part[i] * part[j] / safe)
+    push, stiffness = _palm_push(b, body, palm, c, u[2], orientation, mass[2, 2], dt)
+    force[2] -= push
+    matrix[2, 2] += stiffness
+    for i in range(3):
+        total = -force[i]
+        for j in range(3):
+            total += mass[i, j] * (c[b, j] - c_old[b, j] - dt * u_old[b, j]) / (dt * dt)
+        residual[i] = total
+    # (I·ω − I_old·ω_old)/Δt with I = R·I_b·Rᵀ
+    for i in range(3):
+        momentum = 0.0
+        for j in range(3):
+            new = 0.0
+            old = 0.0
+            for k in range(3):
+                for m in range(3):
+                    new += orientation[i, k] * inertia[b, k, m] * orientation[j, m]
+                    old += orientation_old[b, i, k] * inertia[b, k, m] * orientation_old[b, j, m]
+            momentum += new * theta[b, j] / dt - old * w_old[b, j]
+            matrix[3 + i, 3 + j] = new / (dt * dt)
+        residual[3 + i] = momentum / dt
+
+
+@njit(cache=True, error_model="numpy")
+def _rotation_exp(theta, out):
+    """exp([θ]×) of one rotation vector (3,) [rad] into ``out`` (3, 3), by Rodrigues' formula."""
+    angle = math.sqrt(theta[0] ** 2 + theta[1] ** 2 + theta[2] ** 2)
+    if angle < 1e-8:
+        a = 1.0 - angle**2 / 6.0
+        b = 0.5 - angle**2 / 24.0
+    else:
+        a = math.sin(angle) / angle
+        b = (1.0 - math.cos(angle)) / angle**2
+    k = np.zeros((3, 3))
+    k[0, 1], k[0, 2], k[1, 2] = -theta[2], theta[1], -theta[0]
+    k[1, 0], k[2, 0], k[2, 1] = theta[2], -theta[1], theta[0]
+    for i in range(3):
+        for j in range(3):
+            kk = k[i, 0] * k[0, j] + k[i, 1] * k[1, j] + k[i, 2] * k[2, j]
+            out[i, j] = (1.0 if i == j else 0.0) + a * k[i, j] + b * kk
+
+
+@njit(cache=True, error_model="numpy")
+def _rotations(theta, out):
+    for b in range(theta.shape[0]):
+        _rotation_exp(theta[b], out[b])
 
 
 def rotation_exp(theta: np.ndarray) -> np.ndarray:
     """Rotation matrices exp([θ]×) of rotation vectors (B, 3) [rad], by Rodrigues' formula."""
-    angle = np.linalg.norm(theta, axis=1)
-    k = np.zeros((len(theta), 3, 3))
-    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -theta[:, 2], theta[:, 1], -theta[:, 0]
-    k = k - k.transpose(0, 2, 1)
-    small = angle < 1e-8
-    safe = np.where(small, 1.0, angle)
-    a = np.where(small, 1.0 - angle**2 / 6.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - angle**2 / 24.0, (1.0 - np.cos(safe)) / safe**2)
-    return np.eye(3) + a[:, None, None] * k + b[:, None, None] * (k @ k)
+    out = np.empty((len(theta), 3, 3))
+    _rotations(np.ascontiguousarray(theta, dtype=float), out)
+    return out
 
 
 @njit(cache=True, error_model="numpy")
@@ -247,3 +333,181 @@ def eliminate_rods(band, residual, coupling, free, active, coupled, x0, x_coupli
                         total += product[i, k] * x_coupling[r, i, m]
                 body_block[r, k, m] -= total
     return failures
+
+
+
+@njit(cache=True, error_model="numpy")
+def coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, band_width, mass_term,
+                   tolerance_inverse, free, held, offsets, projection, body, palm, c, theta, body_old, body_water,
+                   basis, body_tolerance, grippers, max_iterations, converged, iterations, ratio, residual):
+    """Newton's method on the rods and the free body of every gripper where ``grippers`` (B,) is True, each gripper
+    on its own until it converges (see the module notes).
+
+    Rod arrays as in :func:`~.assembly.newton_solve`; ``held`` (R, N) marks the nodes held on the body, at
+    ``offsets`` (R, N, 3) from its centre in its frame; ``projection`` (R, D, 3) takes world vectors to each rod's
+    coordinates. ``c`` and ``theta`` (B, 3), the body's centre and its rotation over the step, hold the start and
+    receive the solution; ``body_old`` = (c_old, u_old, R_old, ω_old) at the start of the step; ``body_water``
+    (B, 3) the current at each body [m/s]; ``basis`` (B, 6, 6) the body's admissible motions (zero columns unused);
+    ``body_tolerance`` (6,) [N, N·m]. Writes per gripper ``converged``, ``iterations`` and the largest residual
+    ratio (B,), and every solved rod's final residual (R, n): on held DOFs, the reaction.
+    """
+    n_rods, n_nodes, stride = q.shape
+    n = n_nodes * stride
+    dim = water.shape[1]
+    n_fingers = n_rods // c.shape[0]
+    orientation_old = body_old[2]
+    force = np.empty((n_nodes, stride))
+    velocity = np.empty((n_nodes, dim))
+    acceleration = np.empty((n_nodes, dim))
+    bands = np.empty((n_fingers, n, band_width + 1))
+    coupling = np.empty((n_fingers, n, 6))
+    x0 = np.empty((n_fingers, n))
+    x_coupling = np.empty((n_fingers, n, 6))
+    block = np.empty((n_fingers, 6, 6))
+    rhs = np.empty((n_fingers, 6))
+    touching = np.empty(n_fingers, dtype=np.bool_)
+    every = np.ones(n_fingers, dtype=np.bool_)
+    orientation = np.empty((3, 3))
+    world = np.empty(3)
+    a = np.empty(3)
+    cross = np.empty((3, 3))
+    own = np.empty(6)
+    matrix = np.empty((6, 6))
+    total = np.empty(6)
+    reduced = np.empty((6, 6))
+    reduced_rhs = np.empty(6)
+    step = np.empty(6)
+    rod_delta = np.zeros((n_fingers, n))
+    rotation = np.empty((3, 3))
+    for b in range(c.shape[0]):
+        if not grippers[b]:
+            continue
+        rods = slice(b * n_fingers, (b + 1) * n_fingers)
+        converged[b] = False
+        iterations[b] = 0
+        ratio[b] = np.inf
+        halvings = 0
+        for f in range(n_fingers):
+            touching[f] = held[b * n_fingers + f].any()
+        for it in range(max_iterations + 1):
+            _rotation_exp(theta[b], rotation)
+            for i in range(3):
+                for j in range(3):
+                    orientation[i, j] = rotation[i, 0] * orientation_old[b, 0, j] \
+                        + rotation[i, 1] * orientation_old[b, 1, j] + rotation[i, 2] * orientation_old[b, 2, j]
+            body_residual(b, body, palm, c, theta, body_old, orientation, dt, body_water, own, matrix)
+            largest = 0.0
+            for f in range(n_fingers):
+                r = b * n_fingers + f
+                coupling[f] = 0.0
+                if touching[f]:  # held nodes move with the body: x = P·(c + R·r_h); S = P·[I, −[a]×]
+                    for i in range(n_nodes):
+                        if not held[r, i]:
+                            continue
+                        for k in range(3):
+                            a[k] = orientation[k, 0] * offsets[r, i, 0] + orientation[k, 1] * offsets[r, i, 1] \
+                                + orientation[k, 2] * offsets[r, i, 2]
+                            world[k] = c[b, k] + a[k]
+                        cross[0, 0], cross[0, 1], cross[0, 2] = 0.0, -a[2], a[1]
+                        cross[1, 0], cross[1, 1], cross[1, 2] = a[2], 0.0, -a[0]
+                        cross[2, 0], cross[2, 1], cross[2, 2] = -a[1], a[0], 0.0
+                        for d in range(dim):
+                            row = stride * i + d
+                            q[r, i, d] = projection[r, d, 0] * world[0] + projection[r, d, 1] * world[1] \
+                                + projection[r, d, 2] * world[2]
+                            for k in range(3):
+                                coupling[f, row, k] = projection[r, d, k]
+                                coupling[f, row, 3 + k] = -(projection[r, d, 0] * cross[0, k]
+                                                            + projection[r, d, 1] * cross[1, k]
+                                                            + projection[r, d, 2] * cross[2, k])
+                assemble_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, True,
+                             force, bands[f], velocity, acceleration)
+                q_r = q[r].reshape(n)
+                q_pred_r = q_pred[r].reshape(n)
+                force_r = force.reshape(n)
+                for j in range(n):
+                    residual[r, j] = mass_term[j] * (q_r[j] - q_pred_r[j]) - force_r[j]
+                    scaled = abs(residual[r, j]) * tolerance_inverse[r, j] if free[r, j] else 0.0
+                    if not scaled <= largest:  # also catches NaN
+                        largest = scaled
+                    if touching[f]:  # the reactions load the body
+                        for k in range(6):
+                            own[k] += coupling[f, j, k] * residual[r, j]
+            for k in range(6):  # the residual in the admissible motions
+                total[k] = 0.0
+                for i in range(6):
+                    total[k] += basis[b, i, k] * own[i]
+                scaled = abs(total[k]) / body_tolerance[k]
+                if not scaled <= largest:
+                    largest = scaled
+            if largest <= 1.0:
+                ratio[b] = largest
+                converged[b] = True
+                break
+            if it > 0 and not largest < ratio[b] and halvings < MAX_STEP_HALVINGS:
+                # the last step made the residual worse (a new hold far from the body can throw Newton off): go
+                # back and take half of it
+                halvings += 1
+                for f in range(n_fingers):
+                    r = b * n_fingers + f
+                    q_r = q[r].reshape(n)
+                    for j in range(n):
+                        q_r[j] -= 0.5 ** halvings * rod_delta[f, j]
+                for k in range(3):
+                    c[b, k] -= 0.5 ** halvings * step[k]
+                    theta[b, k] -= 0.5 ** halvings * step[3 + k]
+                continue
+            ratio[b] = largest
+            halvings = 0
+            if it == max_iterations:
+                break
+            for f in range(n_fingers):
+                for j in range(n):
+                    bands[f, j, band_width] += mass_term[j]
+            block[:, :, :] = 0.0
+            rhs[:, :] = 0.0
+            if eliminate_rods(bands, residual[rods], coupling, free[rods], every, touching, x0, x_coupling, block,
+                              rhs):
+                ratio[b] = np.inf
+                break
+            for f in range(n_fingers):
+                for i in range(6):
+                    for j in range(6):
+                        matrix[i, j] += block[f, i, j]
+            for k in range(6):  # Bᵀ·A·B δ = −Bᵀ·G + Bᵀ·Σ rhs, unused columns: identity
+                used = False
+                for i in range(6):
+                    if basis[b, i, k] != 0.0:
+                        used = True
+                value = -total[k]
+                for f in range(n_fingers):
+                    for i in range(6):
+                        value += basis[b, i, k] * rhs[f, i]
+                reduced_rhs[k] = value
+                for m in range(6):
+                    value = 0.0
+                    for i in range(6):
+                        for j in range(6):
+                            value += basis[b, i, k] * matrix[i, j] * basis[b, j, m]
+                    reduced[k, m] = value + (1.0 if k == m and not used else 0.0)
+            solution = np.linalg.solve(reduced, reduced_rhs)
+            for i in range(6):
+                step[i] = 0.0
+                for k in range(6):
+                    step[i] += basis[b, i, k] * solution[k]
+            for f in range(n_fingers):
+                r = b * n_fingers + f
+                q_r = q[r].reshape(n)
+                for j in range(n):
+                    delta = 0.0
+                    if free[r, j]:
+                        delta = -x0[f, j]
+                        if touching[f]:
+                            for k in range(6):
+                                delta -= x_coupling[f, j, k] * step[k]
+                    rod_delta[f, j] = delta
+                    q_r[j] += delta
+            for k in range(3):
+                c[b, k] += step[k]
+                theta[b, k] += step[3 + k]
+            iterations[b] += 1

@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .assembly import assemble, newton_solve
+from .assembly import assemble, finish, newton_solve, per_gripper, predict
 from .config import Scene
 from .contact import (
     PENETRATION_TOLERANCE,
@@ -35,8 +35,8 @@ from .contact import (
 from .discretization import Discretization
 from .forces import ForceTerms
 from .hydrodynamics import Current, CurrentBatch, MorisonDrag, rod_water_velocity
-from .integrators import INTEGRATORS
-from .rigid_body import BodyModel, eliminate_rods, rotation_exp
+from .integrators import INTEGRATORS, evolve
+from .rigid_body import BodyModel, coupled_newton, rotation_exp
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
 
@@ -121,6 +121,7 @@ class Simulator:
         """The batch's first scene; every structural setting (gripper, forces, model, time step) is the same in
         all."""
         self.batch_size = B = int(batch_size)
+        self.n_fingers = scene.gripper.n_fingers
         self.scenes = scenes * B if len(scenes) == 1 else scenes
         """Each gripper's scene: they differ at most in the grasped object's size, place, density and velocity,
         and in the water's current (:meth:`set_scene`)."""
@@ -128,7 +129,7 @@ class Simulator:
         self._integrator = INTEGRATORS[scene.integrator]
         self._subsimulators: dict[int, Simulator] = {}
         self._tolerance_inverse = np.where(self.disc.free, 1.0 / self.disc.residual_scale, 0.0)
-        self._tolerance_by_step: dict[float, np.ndarray] = {}
+        self._per_step_cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._clamp_free = np.tile(self.disc.free, (self.n_rods, 1))
         self._all_rods = np.ones(self.n_rods, dtype=bool)
         self._no_shift = np.zeros((self.n_rods, self.disc.dim))
@@ -141,6 +142,7 @@ class Simulator:
         self._elastic = (disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness, disc.twist_stiffness,
                          disc.voronoi_length)
         self._no_frames = (np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))  # planar: none
+        self._no_acceleration = np.empty((0, 0, 0))
         drag = [f for f in scene.forces if isinstance(f, MorisonDrag)]
         self._currents = CurrentBatch(B) if drag else None
         self._water_cache: tuple[float, np.ndarray | None] = (math.nan, None)
@@ -199,10 +201,6 @@ class Simulator:
             self._object[3][rods] = reachable(obj, self.disc.finger_directions, scene.gripper.finger.length, planar)
 
     @property
-    def n_fingers(self) -> int:
-        return self.scene.gripper.n_fingers
-
-    @property
     def n_rods(self) -> int:
         return self.batch_size * self.n_fingers
 
@@ -217,12 +215,12 @@ class Simulator:
                                       (self.batch_size, self.n_fingers, n_edges, 3)).copy()
             director = np.zeros_like(tangent)
             director[..., 2] = 1.0  # m1 = +z, so κ1 < 0 bends toward −z
-            state = replace(state, tangent=tangent, director=director,
+            state = evolve(state, tangent=tangent, director=director,
                             reference_twist=np.zeros(q.shape[:3]))
         if self._body is not None:
             B, objects = self.batch_size, [s.grasped_object for s in self.scenes]
             centers = np.array([0.5 * (obj.segment[0] + obj.segment[1]) for obj in objects])
-            state = replace(state, held=np.zeros(q.shape[:3], dtype=bool), hold_offset=np.zeros(q.shape[:3] + (3,)),
+            state = evolve(state, held=np.zeros(q.shape[:3], dtype=bool), hold_offset=np.zeros(q.shape[:3] + (3,)),
                             body_position=centers, body_velocity=np.array([obj.velocity for obj in objects]),
                             body_orientation=np.tile(np.eye(3), (B, 1, 1)), body_angular_velocity=np.zeros((B, 3)))
         return state
@@ -288,17 +286,17 @@ class Simulator:
         """One step of the scene's integrator; grippers whose Newton solve fails take two half steps instead, each
         of which may be halved again while ``halvings`` allows. Only the failed grippers are re-run."""
         result = self._integrator.advance(self, state, kbar, dt)
-        failed = np.nonzero(~result.converged)[0]
-        if halvings == 0 or failed.size == 0:
+        if halvings == 0 or result.converged.all():
             return result
+        failed = np.nonzero(~result.converged)[0]
         sub = self._subsimulator(failed)
         sub_kbar = kbar.reshape(self.batch_size, -1)[failed].ravel()
         first = sub._step_adaptive(take_grippers(state, failed), sub_kbar, 0.5 * dt, halvings - 1)
         second = sub._step_adaptive(first.state, sub_kbar, 0.5 * dt, halvings - 1)
-        merged = replace(put_grippers(result.state, failed, second.state), time=result.state.time)
+        merged = evolve(put_grippers(result.state, failed, second.state), time=result.state.time)
         contact = result.contact
         if contact is not None:
-            contact = put_grippers(contact, failed, replace(
+            contact = put_grippers(contact, failed, evolve(
                 second.contact, corrector_iterations=first.contact.corrector_iterations
                 + second.contact.corrector_iterations))
         return StepResult(state=merged, converged=_set(result.converged, failed, first.converged & second.converged),
@@ -337,13 +335,13 @@ class Simulator:
             if not np.all(result.converged):
                 pseudo_step *= 0.25
                 continue
-            state = replace(result.state, velocity=zero, time=state.time, acceleration=None)
+            state = evolve(result.state, velocity=zero, time=state.time, acceleration=None)
             static = self.static_residual(state, kbar)
             if np.all(static <= 1.0):
-                return replace(result, state=state, residual=static)
+                return evolve(result, state=state, residual=static)
             pseudo_step = min(2.0 * pseudo_step, 1.0e6)
         assert result is not None
-        return replace(result, converged=np.zeros_like(result.converged))
+        return evolve(result, converged=np.zeros_like(result.converged))
 
     def static_residual(self, state: RodState, natural_curvature) -> np.ndarray:
         """Largest force imbalance at rest on a free DOF (not clamped, not held by contact) divided by its Newton
@@ -392,16 +390,18 @@ class Simulator:
         free.reshape(held.shape[0], disc.n_nodes, disc.stride)[..., : disc.dim][held] = False
         return free
 
-    def _newton_tolerance_inverse(self, dt: float) -> np.ndarray:
-        """1/tolerance of every DOF of every rod (R, n) for steps of ``dt``. The tolerance is the scene's, raised
-        where needed above the roundoff of the inertial term M·(q − q_pred)/Δt², which at tiny steps would
-        otherwise make it unreachable."""
-        if dt not in self._tolerance_by_step:
+    def _per_step(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """For steps of ``dt``: the mass term M/Δt² of every DOF (n,), and 1/tolerance of every DOF of every rod
+        (R, n). The tolerance is the scene's, raised where needed above the roundoff of the inertial term
+        M·(q − q_pred)/Δt², which at tiny steps would otherwise make it unreachable."""
+        if dt not in self._per_step_cache:
             disc = self.disc
-            roundoff = 64.0 * np.finfo(float).eps * disc.dof_mass / dt**2 * self.scene.gripper.finger.length
+            mass_term = disc.dof_mass / dt**2
+            roundoff = 64.0 * np.finfo(float).eps * mass_term * self.scene.gripper.finger.length
             tolerance = np.maximum(disc.residual_scale, roundoff)
-            self._tolerance_by_step[dt] = np.tile(np.where(disc.free, 1.0 / tolerance, 0.0), (self.n_rods, 1))
-        return self._tolerance_by_step[dt]
+            self._per_step_cache[dt] = mass_term, np.tile(np.where(disc.free, 1.0 / tolerance, 0.0),
+                                                          (self.n_rods, 1))
+        return self._per_step_cache[dt]
 
     def _newton(self, q, q_old, q_pred, frames_old, kbar, time, dt, free, rods):
         """Newton's method for the rods where ``rods`` is True; ``q`` (R, N, S) holds the start and receives the
@@ -413,9 +413,10 @@ class Simulator:
         iterations = np.zeros(R, dtype=np.int64)
         ratio = np.full(R, np.inf)
         residual = np.zeros((R, disc.n_dofs))
+        mass_term, tolerance_inverse = self._per_step(dt)
         newton_solve(q, q_old, q_pred, kbar, self._water(time, R), dt, self._elastic, frames_old or self._no_frames,
-                     self._force_terms, disc.band_width, disc.dof_mass / dt**2, self._newton_tolerance_inverse(dt),
-                     free, rods, self.scene.newton.max_iterations, converged, iterations, ratio, residual)
+                     self._force_terms, disc.band_width, mass_term, tolerance_inverse, free, rods,
+                     self.scene.newton.max_iterations, converged, iterations, ratio, residual)
         return converged, iterations, ratio, residual
 
     def _contact_changes(self, q, q_old, residual, held, starts, ends, radii, searched, shift, hold_at):
@@ -434,16 +435,18 @@ class Simulator:
 
     def _next_holds(self, k, held, adhesive, new_hold, changed):
         """The corrector's decision after solve ``k``: the holds of the next solve (R, N) and the rods to solve
-        again (R,), or None to stop. Within the budget, new penetrations are held and adhesive holds released. When
-        the budget is spent with nodes still inside the object, one last solve holds them and releases nothing: a
-        hold that pulls for one step is a smaller error than a node left inside the object, from which the next step
-        may not recover (the step reports resolved = False either way)."""
-        budget = self.scene.contact.max_corrector_iterations
-        if not changed.any() or k > budget or (k == budget and not new_hold.any()):
+        again (R,), or None to stop. Within the budget, new penetrations are held and adhesive holds released. Once
+        the budget is spent, solves continue only while nodes are inside the object, and hold them without
+        releasing anything, so they end (holds only grow) with no node inside: a hold that pulls for one step is a
+        smaller error than a node left inside the object, from which the next step may not recover (the step
+        reports resolved = False either way)."""
+        if not changed.any():
             return None
-        if k == budget:
-            return held | new_hold, new_hold.any(axis=1)
-        return (held & ~adhesive) | new_hold, changed
+        if k < self.scene.contact.max_corrector_iterations:
+            return (held & ~adhesive) | new_hold, changed
+        if not new_hold.any():
+            return None
+        return held | new_hold, new_hold.any(axis=1)
 
     def _solve_with_contact(self, state, q_start, q_old, q_pred, frames_old, kbar, dt):
         """The predictor–corrector (see :mod:`.contact`): solve, release adhesive holds, hold new penetrations, and
@@ -461,7 +464,7 @@ class Simulator:
         corrector = np.zeros(R, dtype=np.int64)
         rods = self._all_rods
         starts, ends, radii, searched = self._object
-        for k in range(self.scene.contact.max_corrector_iterations + 2):
+        for k in range(self.scene.contact.max_corrector_iterations + N + 1):  # holds-only solves end by N
             q[..., :D][held & rods[:, None]] = hold_at[held & rods[:, None]]  # from the last solution, warm
             solved = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt, self._free_mask(held), rods)
             for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
@@ -512,7 +515,7 @@ class Simulator:
         ratio = np.full(R, np.inf)
         residual = np.zeros((R, disc.n_dofs))
         grippers = np.ones(B, dtype=bool)  # solved again: all at first, then those whose contacts changed
-        for k in range(self.scene.contact.max_corrector_iterations + 2):
+        for k in range(self.scene.contact.max_corrector_iterations + N + 1):  # holds-only solves end by N
             rods = np.repeat(grippers, F)
             if grippers.all():
                 solved = self._newton_with_body(q, q_old, q_pred, frames_old, kbar, state.time, dt, held, offsets,
@@ -573,96 +576,35 @@ class Simulator:
 
     def _newton_with_body(self, q, q_old, q_pred, frames_old, kbar, time, dt, held, offsets, body_old, c, theta,
                           grippers):
-        """Newton's method on the rods and a free sphere together (see :mod:`.rigid_body`), for the grippers where
-        ``grippers`` (B,) is True. ``q`` (R, N, S), the body's centre ``c`` (B, 3) and its rotation over the step
-        ``theta`` (B, 3) hold the start and receive the solution. Returns per-rod converged, iterations and residual
-        ratio (R,), and the residual M·(q − q_pred)/Δt² − f (R, n) (the reactions, on held DOFs)."""
+        """Newton's method on the rods and a free body together (:func:`~.rigid_body.coupled_newton`), for the
+        grippers where ``grippers`` (B,) is True. ``q`` (R, N, S), the body's centre ``c`` (B, 3) and its rotation
+        over the step ``theta`` (B, 3) hold the start and receive the solution. Returns per-rod converged,
+        iterations and residual ratio (R,), and the residual M·(q − q_pred)/Δt² − f (R, n) (the reactions, on held
+        DOFs)."""
         disc = self.disc
-        R, N, S, D, n = self.n_rods, disc.n_nodes, disc.stride, disc.dim, disc.n_dofs
         B, F = self.batch_size, self.n_fingers
-        c_old, u_old, orientation_old, w_old = body_old
-        mass_term = disc.dof_mass / dt**2
-        tolerance_inverse = self._newton_tolerance_inverse(dt)
-        free = self._free_mask(held)
-        projection = self._projection
-        kd = disc.band_width
-        active = grippers.copy()
+        mass_term, tolerance_inverse = self._per_step(dt)
         converged = np.zeros(B, dtype=bool)
         iterations = np.zeros(B, dtype=np.int64)
         ratio = np.full(B, np.inf)
-        max_iterations = self.scene.newton.max_iterations
-        q_flat = q.reshape(R, n)
-        held_positions = q[..., :D]
+        residual = np.zeros((self.n_rods, disc.n_dofs))
         water = np.zeros((B, 3)) if self._currents is None else self._currents.at(time)
-        basis = self._body_basis(held)  # the body's admissible motions (B, 6, k), fixed while the holds are
-        touching = held.any(axis=1)  # the rods coupled to their body
-        for it in range(max_iterations + 1):
-            orientation = rotation_exp(theta) @ orientation_old
-            a = np.einsum("rij,rnj->rni", np.repeat(orientation, F, axis=0)[touching], offsets[touching])
-            nodes_world = np.repeat(c, F, axis=0)[touching][:, None, :] + a
-            positions = held_positions[touching]
-            positions[held[touching]] = np.einsum("rdj,rnj->rnd", projection[touching], nodes_world)[held[touching]]
-            held_positions[touching] = positions
-            force, band = self._assemble(q, q_old, q_pred, frames_old, kbar, time, dt)
-            residual = mass_term * (q_flat - q_pred.reshape(R, n)) - force.reshape(R, n)
-            # S: a held DOF's motion per unit body motion (δc, δθ): P·(δc − [a]×·δθ); zero on rods holding nothing
-            cross = np.zeros(a.shape + (3,))
-            cross[..., 0, 1], cross[..., 0, 2], cross[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
-            cross -= np.swapaxes(cross, -1, -2)
-            rod_projection = projection[touching][:, None, :, :]
-            part = np.zeros((len(a), N, S, 6))
-            part[..., :D, :3] = np.broadcast_to(rod_projection, (len(a), N, D, 3))
-            part[..., :D, 3:] = -rod_projection @ cross
-            part *= held[touching][..., None, None]
-            coupling = np.zeros((R, n, 6))
-            coupling[touching] = part.reshape(len(a), n, 6)
-            own, translational, rotational = self._body.residual(c, c_old, u_old, theta, w_old, orientation,
-                                                                 orientation_old, dt, water)
-            reaction_load = np.zeros((R, 6))
-            reaction_load[touching] = np.einsum("rnk,rn->rk", coupling[touching], residual[touching])
-            body_residual = own + reaction_load.reshape(B, F, 6).sum(axis=1)
-            rod_ratio = np.max(np.abs(residual) * tolerance_inverse * free, axis=1).reshape(B, F).max(axis=1)
-            body_residual = np.einsum("bik,bi->bk", basis, body_residual)
-            body_ratio = np.max(np.abs(body_residual) / self._body_tolerance, axis=1)
-            ratio_now = np.maximum(rod_ratio, body_ratio)
-            ratio = np.where(active, ratio_now, ratio)
-            done = active & (ratio_now <= 1.0)
-            converged |= done
-            active &= ~done
-            if not active.any() or it == max_iterations:
-                break
-            rods = np.repeat(active, F)
-            band[..., kd] += mass_term
-            x0 = np.zeros((R, n))
-            x_coupling = np.zeros((R, n, 6))
-            block = np.zeros((R, 6, 6))
-            rhs = np.zeros((R, 6))
-            eliminate_rods(band, residual, coupling, free, rods, touching, x0, x_coupling, block, rhs)
-            matrix = block.reshape(B, F, 6, 6).sum(axis=1)
-            matrix[:, :3, :3] += translational
-            matrix[:, 3:, 3:] += rotational
-            step = np.zeros((B, 6))
-            reduced = np.einsum("bik,bij,bjm->bkm", basis, matrix, basis)
-            reduced += np.eye(6) * ~np.any(basis != 0.0, axis=1)[:, None, :]  # unused columns: identity
-            reduced_rhs = -body_residual + np.einsum("bik,bi->bk", basis, rhs.reshape(B, F, 6).sum(axis=1))
-            step[active] = np.einsum("bik,bk->bi", basis[active],
-                                     np.linalg.solve(reduced[active], reduced_rhs[active][..., None])[..., 0])
-            rod_step = -x0
-            rod_step[touching] -= np.einsum("rnk,rk->rn", x_coupling[touching], np.repeat(step, F, axis=0)[touching])
-            q_flat[rods] += np.where(free[rods], rod_step[rods], 0.0)
-            c[active] += step[active, :3]
-            theta[active] += step[active, 3:]
-            iterations[active] += 1
+        coupled_newton(q, q_old, q_pred, kbar, self._water(time, self.n_rods), dt, self._elastic,
+                       frames_old or self._no_frames, self._force_terms, disc.band_width, mass_term, tolerance_inverse,
+                       self._free_mask(held), held, offsets, self._projection, *self._body.arrays(), c, theta,
+                       tuple(np.ascontiguousarray(x) for x in body_old), water, self._body_basis(held),
+                       self._body_tolerance, grippers, self.scene.newton.max_iterations, converged, iterations, ratio,
+                       residual)
         return np.repeat(converged, F), np.repeat(iterations, F), np.repeat(ratio, F), residual
 
     def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
         disc = self.disc
         R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
         q_old = state.q.reshape(R, N, S)
-        q_pred = q_old + dt * velocity_old.reshape(R, N, S)
-        q_start = q_pred.copy()
-        if state.acceleration is not None and velocity_old is state.velocity:
-            q_start += dt * dt * state.acceleration.reshape(R, N, S)  # start from the extrapolated motion
+        q_pred, q_start = np.empty((R, N, S)), np.empty((R, N, S))
+        extrapolate = state.acceleration is not None and velocity_old is state.velocity  # not for a pseudo-step
+        predict(q_old, velocity_old.reshape(R, N, S),
+                state.acceleration.reshape(R, N, S) if extrapolate else self._no_acceleration, dt, q_pred, q_start)
         frames_old = self._frames(state)
         body = None
         if self._body is not None:
@@ -678,13 +620,13 @@ class Simulator:
                 state, q_start, q_old, q_pred, frames_old, kbar, dt)
 
         B, F = self.batch_size, self.n_fingers
-        velocity = ((q - q_old) / dt).reshape(state.q.shape)
+        velocity, acceleration = np.empty(state.q.shape), np.empty(state.q.shape)
+        finish(q, q_old, velocity_old.reshape(R, N, S), dt, velocity.reshape(R, N, S), acceleration.reshape(R, N, S))
         new_state = RodState(q=q.reshape(state.q.shape), velocity=velocity, time=state.time + dt,
-                             acceleration=(velocity - velocity_old) / dt,
-                             held=None if held is None else held.reshape(B, F, N))
+                             acceleration=acceleration, held=None if held is None else held.reshape(B, F, N))
         if body is not None:
             offsets, position, body_velocity, orientation, angular_velocity = body
-            new_state = replace(new_state, hold_offset=offsets.reshape(B, F, N, 3), body_position=position,
+            new_state = evolve(new_state, hold_offset=offsets.reshape(B, F, N, 3), body_position=position,
                                 body_velocity=body_velocity, body_orientation=orientation,
                                 body_angular_velocity=angular_velocity)
         if disc.model == "3d":
@@ -693,7 +635,7 @@ class Simulator:
             reference_twist = np.empty((R, N))
             rod3d_update_frames(q, *frames_old, tangent, director, reference_twist)
             shape = state.q.shape[:3]
-            new_state = replace(new_state, tangent=tangent.reshape(shape[:2] + (N - 1, 3)),
+            new_state = evolve(new_state, tangent=tangent.reshape(shape[:2] + (N - 1, 3)),
                                 director=director.reshape(shape[:2] + (N - 1, 3)),
                                 reference_twist=reference_twist.reshape(shape))
         contact = None
@@ -711,11 +653,9 @@ class Simulator:
                 resolved=~changed.reshape(B, F).any(axis=1),
                 palm_reaction=None if body is None else self._body.palm_reaction(
                     body[1], state.body_position, body[3], state.body_orientation, dt))
-        ratio = np.where(np.isnan(ratio), np.inf, ratio)
-        return StepResult(state=new_state, converged=converged.reshape(B, F).all(axis=1),
-                          newton_iterations=iterations.reshape(B, F).max(axis=1),
-                          residual=ratio.reshape(B, F).max(axis=1), contact=contact,
-                          substeps=np.ones(B, dtype=np.int64))
+        converged, iterations, ratio = per_gripper(converged, iterations, ratio, F)
+        return StepResult(state=new_state, converged=converged, newton_iterations=iterations, residual=ratio,
+                          contact=contact, substeps=np.ones(B, dtype=np.int64))
 
 
 def _structure(scene: Scene) -> tuple:
@@ -730,13 +670,13 @@ def _structure(scene: Scene) -> tuple:
 
 def take_grippers(record, index: np.ndarray):
     """The grippers ``index`` of a state or contact report (every array field has the batch axis first)."""
-    return replace(record, **{name: value[index] for name, value in vars(record).items()
+    return evolve(record, **{name: value[index] for name, value in vars(record).items()
                               if isinstance(value, np.ndarray)})
 
 
 def put_grippers(record, index: np.ndarray, part):
     """A copy of ``record`` whose grippers ``index`` are taken from ``part``."""
-    return replace(record, **{name: _set(value, index, getattr(part, name)) for name, value in vars(record).items()
+    return evolve(record, **{name: _set(value, index, getattr(part, name)) for name, value in vars(record).items()
                               if isinstance(value, np.ndarray)})
 
 
