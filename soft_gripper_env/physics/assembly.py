@@ -165,24 +165,55 @@ def newton_solve(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames
 
 @njit(cache=True, error_model="numpy")
 def predict(q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
-    """The predictor q_pred = q_old + Δt·v_old, and Newton's start q_pred + Δt²·a_old, the last step's motion
-    extrapolated (``acceleration_old`` empty: the predictor itself). Arrays (R, N, S)."""
-    extrapolate = acceleration_old.size > 0
+    """The predictor q_pred = q_old + Δt·v_old of every rod, and Newton's start q_pred + Δt²·a_old, the last step's
+    motion extrapolated (``acceleration_old`` empty: the predictor itself). Arrays (R, N, S)."""
     for r in range(q_old.shape[0]):
-        for i in range(q_old.shape[1]):
-            for k in range(q_old.shape[2]):
-                q_pred[r, i, k] = q_old[r, i, k] + dt * velocity_old[r, i, k]
-                q_start[r, i, k] = q_pred[r, i, k] + (dt * dt * acceleration_old[r, i, k] if extrapolate else 0.0)
+        _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q_start)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
+    extrapolate = acceleration_old.size > 0
+    for i in range(q_old.shape[1]):
+        for k in range(q_old.shape[2]):
+            q_pred[r, i, k] = q_old[r, i, k] + dt * velocity_old[r, i, k]
+            q_start[r, i, k] = q_pred[r, i, k] + (dt * dt * acceleration_old[r, i, k] if extrapolate else 0.0)
 
 
 @njit(cache=True, error_model="numpy")
 def finish(q, q_old, velocity_old, dt, velocity, acceleration):
-    """The end of a backward-Euler step: v = (q − q_old)/Δt and the mean acceleration (v − v_old)/Δt."""
+    """The end of a backward-Euler step of every rod: v = (q − q_old)/Δt and the mean acceleration (v − v_old)/Δt."""
     for r in range(q.shape[0]):
-        for i in range(q.shape[1]):
-            for k in range(q.shape[2]):
-                velocity[r, i, k] = (q[r, i, k] - q_old[r, i, k]) / dt
-                acceleration[r, i, k] = (velocity[r, i, k] - velocity_old[r, i, k]) / dt
+        _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration):
+    for i in range(q.shape[1]):
+        for k in range(q.shape[2]):
+            velocity[r, i, k] = (q[r, i, k] - q_old[r, i, k]) / dt
+            acceleration[r, i, k] = (velocity[r, i, k] - velocity_old[r, i, k]) / dt
+
+
+@njit(cache=True, error_model="numpy")
+def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water, dt, elastic, frames, terms,
+                 band_width, mass_term, tolerance_inverse, free, max_iterations, q_pred, q, velocity, acceleration,
+                 converged, iterations, ratio, residual):
+    """A whole backward-Euler step of rods that move on their own: :func:`predict`, :func:`newton_solve` from the
+    extrapolated start, and :func:`finish`, rod by rod, in one call (the scene without an object's hot path)."""
+    n_rods, n_nodes, stride = q_old.shape
+    dim = water.shape[1]
+    force = np.empty((n_nodes, stride))
+    band = np.empty((n_nodes * stride, band_width + 1))
+    scratch_velocity = np.empty((n_nodes, dim))
+    scratch_acceleration = np.empty((n_nodes, dim))
+    step = np.empty(n_nodes * stride)
+    for r in range(n_rods):
+        _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q)
+        newton_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, mass_term,
+                   tolerance_inverse, free, max_iterations, converged, iterations, ratio, residual, force, band,
+                   scratch_velocity, scratch_acceleration, step)
+        _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
 
 
 @njit(cache=True, error_model="numpy")

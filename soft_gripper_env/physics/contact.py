@@ -6,10 +6,12 @@ its path over the step (relative to the object) entered the surface, which is th
 fast impact (a node 1 cm inside after a step at 1 m/s) from stretching its edges by the projection. The reaction on a
 held node is the unbalanced force of its equation of motion, R = M·a − f (physics.md §1). Contact is
 compression-only: a held node whose normal reaction R·n turns adhesive (pulls it into the object, R·n < 0) is
-released and the step solved again. The corrector repeats until nothing changes, at most
-:attr:`ContactSettings.max_corrector_iterations` times. Held nodes stick: they stay where they were held until
-released, so the contact transmits tangential force without sliding (a frictional-sliding model would replace the
-stick rule here). The base clamp is kept throughout.
+released (a reaction pulling by less than Newton's force tolerance is zero to that tolerance and stays) and the
+step solved again, from the last solution. The corrector repeats until nothing changes, at most
+:attr:`ContactSettings.max_corrector_iterations` times; if nodes are still inside the object then, it holds them,
+releasing nothing, until none is (the step then reports ``resolved = False``). Held nodes stick: they stay where
+they were held until released, so the contact transmits tangential force without sliding (a frictional-sliding
+model would replace the stick rule here). The base clamp is kept throughout.
 
 Objects are fixed in space: a :class:`Sphere`, or a :class:`Capsule` (the points within a radius of a segment; a
 sphere is a capsule of zero length, and one kernel serves both). Contact is node-based: an edge between two nodes
@@ -21,8 +23,8 @@ is a distance d from the plane is a circle of radius √(R² − d²) there. The
 the out-of-plane part of a contact force is carried by it and not reported. A free sphere held by planar fingers
 translates but does not turn: turning would carry held points out of the fingers' planes, and the torque it would
 take is the fingers' out-of-plane stiffness, which the planar model treats as rigid. While the object stays on the
-gripper's axis the section is a great circle and the planar and 3-D models agree. The palm is not a contact
-surface: an object pushed up against it passes the clamped nodes.
+gripper's axis the section is a great circle and the planar and 3-D models agree. A free object pushed up against
+the palm meets a compliant disc (:attr:`ContactSettings.palm_stiffness`; :mod:`.rigid_body`), not the clamped nodes.
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .assembly import assemble, finish, newton_solve, per_gripper, predict
+from .assembly import advance_rods, assemble, finish, newton_solve, per_gripper, predict
 from .config import Scene
 from .contact import (
     PENETRATION_TOLERANCE,
@@ -600,28 +600,32 @@ class Simulator:
     def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
         disc = self.disc
         R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
-        q_old = state.q.reshape(R, N, S)
-        q_pred, q_start = np.empty((R, N, S)), np.empty((R, N, S))
+        q_old, v_old = state.q.reshape(R, N, S), velocity_old.reshape(R, N, S)
         extrapolate = state.acceleration is not None and velocity_old is state.velocity  # not for a pseudo-step
-        predict(q_old, velocity_old.reshape(R, N, S),
-                state.acceleration.reshape(R, N, S) if extrapolate else self._no_acceleration, dt, q_pred, q_start)
-        frames_old = self._frames(state)
-        body = None
-        if self._body is not None:
-            q, held, changed, corrector, converged, iterations, ratio, residual, body = self._solve_with_body(
-                state, q_start, q_old, q_pred, frames_old, kbar, dt)
-        elif self._object is None:
-            q = q_start
-            held = changed = corrector = None
-            converged, iterations, ratio, residual = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt,
-                                                                  self._clamp_free, self._all_rods)
-        else:
-            q, held, changed, corrector, converged, iterations, ratio, residual = self._solve_with_contact(
-                state, q_start, q_old, q_pred, frames_old, kbar, dt)
-
-        B, F = self.batch_size, self.n_fingers
+        acceleration_old = state.acceleration.reshape(R, N, S) if extrapolate else self._no_acceleration
+        q_pred, q = np.empty((R, N, S)), np.empty((R, N, S))
         velocity, acceleration = np.empty(state.q.shape), np.empty(state.q.shape)
-        finish(q, q_old, velocity_old.reshape(R, N, S), dt, velocity.reshape(R, N, S), acceleration.reshape(R, N, S))
+        frames_old = self._frames(state)
+        body = held = changed = corrector = None
+        if self._body is None and self._object is None:  # rods on their own: the whole step in one kernel
+            converged, iterations = np.empty(R, dtype=bool), np.empty(R, dtype=np.int64)
+            ratio, residual = np.empty(R), np.empty((R, disc.n_dofs))
+            mass_term, tolerance_inverse = self._per_step(dt)
+            advance_rods(q_old, v_old, acceleration_old, kbar, self._water(state.time, R), dt, self._elastic,
+                         frames_old or self._no_frames, self._force_terms, disc.band_width, mass_term,
+                         tolerance_inverse, self._clamp_free, self.scene.newton.max_iterations, q_pred, q,
+                         velocity.reshape(R, N, S), acceleration.reshape(R, N, S), converged, iterations, ratio,
+                         residual)
+        else:
+            predict(q_old, v_old, acceleration_old, dt, q_pred, q)
+            if self._body is not None:
+                q, held, changed, corrector, converged, iterations, ratio, residual, body = self._solve_with_body(
+                    state, q, q_old, q_pred, frames_old, kbar, dt)
+            else:
+                q, held, changed, corrector, converged, iterations, ratio, residual = self._solve_with_contact(
+                    state, q, q_old, q_pred, frames_old, kbar, dt)
+            finish(q, q_old, v_old, dt, velocity.reshape(R, N, S), acceleration.reshape(R, N, S))
+        B, F = self.batch_size, self.n_fingers
         new_state = RodState(q=q.reshape(state.q.shape), velocity=velocity, time=state.time + dt,
                              acceleration=acceleration, held=None if held is None else held.reshape(B, F, N))
         if body is not None:

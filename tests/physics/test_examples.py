@@ -116,7 +116,7 @@ def test_medium_cost_benchmark(tmp_path):
 
 @pytest.mark.slow
 def test_speed_vs_error_quick(tmp_path):
-    stdout = run_script("benchmarks/speed_vs_error.py", "--out", tmp_path, "--quick")
+    stdout = run_script("benchmarks/speed_vs_error.py", "--out", tmp_path, "--quick", "--repeats", "1")
     with open(tmp_path / "speed_vs_error.csv") as handle:
         rows = list(csv.DictReader(handle))
     assert list(rows[0]) == ["scene", "model", "integrator", "n_nodes", "dt_s", "wall_s_per_sim_s", "max_tip_error_m",
