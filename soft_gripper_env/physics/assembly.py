@@ -149,18 +149,19 @@ def newton_solve(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames
     (linear solves) and that ``ratio`` (R,), and the final ``residual`` (R, n): on held DOFs, the contact reaction.
     A rod whose factorisation fails stops with ratio inf and NaN coordinates.
     """
-    n_rods, n_nodes, stride = q.shape
-    dim = water.shape[1]
-    force = np.empty((n_nodes, stride))
-    band = np.empty((n_nodes * stride, band_width + 1))
-    velocity = np.empty((n_nodes, dim))
-    acceleration = np.empty((n_nodes, dim))
-    step = np.empty(n_nodes * stride)
-    for r in range(n_rods):
+    scratch = _newton_scratch(q, water, band_width)
+    for r in range(q.shape[0]):
         if rods[r]:
             newton_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, mass_term,
-                       tolerance_inverse, free, max_iterations, converged, iterations, ratio, residual, force, band,
-                       velocity, acceleration, step)
+                       tolerance_inverse, free, max_iterations, converged, iterations, ratio, residual, *scratch)
+
+
+@njit(cache=True, error_model="numpy")
+def _newton_scratch(q, water, band_width):
+    """One rod's work arrays for :func:`newton_rod`: force, band, velocity, acceleration and step."""
+    n_nodes, stride, dim = q.shape[1], q.shape[2], water.shape[1]
+    return (np.empty((n_nodes, stride)), np.empty((n_nodes * stride, band_width + 1)), np.empty((n_nodes, dim)),
+            np.empty((n_nodes, dim)), np.empty(n_nodes * stride))
 
 
 @njit(cache=True, error_model="numpy")
@@ -201,18 +202,11 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
                  converged, iterations, ratio, residual):
     """A whole backward-Euler step of rods that move on their own: :func:`predict`, :func:`newton_solve` from the
     extrapolated start, and :func:`finish`, rod by rod, in one call (the scene without an object's hot path)."""
-    n_rods, n_nodes, stride = q_old.shape
-    dim = water.shape[1]
-    force = np.empty((n_nodes, stride))
-    band = np.empty((n_nodes * stride, band_width + 1))
-    scratch_velocity = np.empty((n_nodes, dim))
-    scratch_acceleration = np.empty((n_nodes, dim))
-    step = np.empty(n_nodes * stride)
-    for r in range(n_rods):
+    scratch = _newton_scratch(q, water, band_width)
+    for r in range(q.shape[0]):
         _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q)
         newton_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, mass_term,
-                   tolerance_inverse, free, max_iterations, converged, iterations, ratio, residual, force, band,
-                   scratch_velocity, scratch_acceleration, step)
+                   tolerance_inverse, free, max_iterations, converged, iterations, ratio, residual, *scratch)
         _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
 
 
