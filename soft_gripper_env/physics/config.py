@@ -148,8 +148,9 @@ class NewtonSettings:
     moment residual below ``relative_tolerance``·EI/L [N·m]. Dimensionless."""
     max_iterations: int = 25
     max_step_halvings: int = 4
-    """When Newton fails, the step is retried as two half steps, each of which may be halved again, up to this many
-    times (at most 2**max_step_halvings substeps). 0 turns adaptive substepping off."""
+    """When Newton fails, or the contact corrector spends its budget, the step is retried as two half steps, each of
+    which may be halved again, up to this many times (at most 2**max_step_halvings substeps). 0 turns adaptive
+    substepping off."""
 
     def __post_init__(self) -> None:
         check_range("NewtonSettings", "relative_tolerance", self.relative_tolerance, "(dimensionless)", 0.0, 1.0)

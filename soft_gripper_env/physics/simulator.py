@@ -92,7 +92,8 @@ class StepResult:
     residual: np.ndarray
     """Final residual: the largest free-DOF residual divided by its tolerance (≤ 1 when converged; dimensionless)."""
     substeps: np.ndarray
-    """Substeps the step took, (B,): 1 unless Newton failed and the step was halved (adaptive substepping)."""
+    """Substeps the step took, (B,): 1 unless Newton failed or the contact corrector spent its budget, and the step
+    was halved (adaptive substepping)."""
     contact: ContactReport | None = None
     """Contact reactions of the step; None in a scene without an object."""
 
@@ -286,9 +287,10 @@ class Simulator:
         """One step of the scene's integrator; grippers whose Newton solve fails take two half steps instead, each
         of which may be halved again while ``halvings`` allows. Only the failed grippers are re-run."""
         result = self._integrator.advance(self, state, kbar, dt)
-        if halvings == 0 or result.converged.all():
+        settled = result.converged if result.contact is None else result.converged & result.contact.resolved
+        if halvings == 0 or settled.all():
             return result
-        failed = np.nonzero(~result.converged)[0]
+        failed = np.nonzero(~settled)[0]  # a corrector that spent its budget is retried in halves too
         sub = self._subsimulator(failed)
         sub_kbar = kbar.reshape(self.batch_size, -1)[failed].ravel()
         first = sub._step_adaptive(take_grippers(state, failed), sub_kbar, 0.5 * dt, halvings - 1)

@@ -236,3 +236,22 @@ def test_fingers_close_on_a_free_capsule():
         np.testing.assert_allclose(distance[state.held[0]], capsule.radius, atol=1e-9)
         assert not result.contact.resolved[0] or np.all(result.contact.normal_reaction[state.held] >= 0)
     assert state.held[0].any(axis=1).all()  # every finger holds it
+
+
+def test_a_step_whose_corrector_spends_its_budget_is_halved():
+    """With no re-solves allowed (max_corrector_iterations = 0), the thrown sphere's impact cannot be resolved in
+    one step of 0.01 s; the step is retried in halves, which resolve it, and every whole step that is reported
+    resolved took one substep."""
+    sphere = Sphere(0.03, (0.12, 0.0, -0.1), density=WATER_DENSITY, velocity=(0.0, 0.0, 1.0))
+    scene = paper_scene("planar", medium="water", grasped_object=sphere)
+    sim = Simulator(replace(scene, contact=replace(scene.contact, max_corrector_iterations=0)))
+    state = sim.initial_state()
+    halved = []
+    for _ in range(10):
+        result = sim.step(state, 0.0)
+        assert result.converged.all()
+        assert result.substeps[0] > 1 or result.contact.resolved[0]
+        if result.substeps[0] > 1:
+            halved.append(bool(result.contact.resolved[0]))
+        state = result.state
+    assert halved and halved[0]  # the first halved step (the impact) ends resolved
