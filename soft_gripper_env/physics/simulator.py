@@ -1,16 +1,16 @@
 """Batched implicit time stepping of the gripper's fingers.
 
 Every state array carries a leading batch axis B (grippers) and a finger axis F. Internally the B·F rods are
-flattened to one rod axis R, and the per-rod work (elastic forces, Hessian, banded solve) runs in compiled kernels
-over all rods at once; the Newton loop itself is a few array operations per iteration, so its cost does not grow
-with B. Each rod stops iterating as soon as it has converged, so a rod's result never depends on which other rods
-share its batch.
+flattened to one rod axis R. The whole Newton loop runs in compiled kernels (:mod:`.assembly` for rods on their own
+or against a fixed object, :func:`.rigid_body.coupled_newton` for rods and a free body); this module sets up the
+step, runs the contact corrector around the solves and halves steps that fail. Each rod (or gripper, with a free
+body) stops iterating as soon as it has converged, so its result does not depend on what else shares its batch.
 
 Backward Euler, on the free DOFs q (physics.md §1):
 
     M·(q − q_old − Δt·v_old)/Δt² − f(q, (q − q_old)/Δt) = 0,
 
-solved by Newton's method started from the predictor q_old + Δt·v_old.
+solved by Newton's method started from the predictor q_old + Δt·v_old plus the last step's motion, Δt²·a_old.
 """
 
 from __future__ import annotations
