@@ -197,17 +197,44 @@ def _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration):
 
 
 @njit(cache=True, error_model="numpy")
+def midpoint_end(q_old, velocity_old, q, velocity):
+    """The implicit midpoint rule's end from its backward-Euler half step (see :mod:`.integrators`), in place:
+    q₁ = 2·q_½ − q₀, v₁ = 2·v_½ − v₀. Arrays (R, N, S)."""
+    for r in range(q.shape[0]):
+        _midpoint_end_rod(r, q_old, velocity_old, q, velocity)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _midpoint_end_rod(r, q_old, velocity_old, q, velocity):
+    for i in range(q.shape[1]):
+        for k in range(q.shape[2]):
+            q[r, i, k] = 2.0 * q[r, i, k] - q_old[r, i, k]
+            velocity[r, i, k] = 2.0 * velocity[r, i, k] - velocity_old[r, i, k]
+
+
+@njit(cache=True, error_model="numpy")
 def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water, dt, elastic, frames, terms,
-                 band_width, mass_term, tolerance_inverse, free, max_iterations, q_pred, q, velocity, acceleration,
-                 converged, iterations, ratio, residual):
+                 band_width, mass_term, tolerance_inverse, free, max_iterations, midpoint, n_fingers, q, velocity,
+                 acceleration):
     """A whole backward-Euler step of rods that move on their own: :func:`predict`, :func:`newton_solve` from the
-    extrapolated start, and :func:`finish`, rod by rod, in one call (the scene without an object's hot path)."""
+    extrapolated start, and :func:`finish`, rod by rod, in one call (the scene without an object's hot path); with
+    ``midpoint``, it is the midpoint rule's half step and :func:`midpoint_end` follows. Writes the new coordinates,
+    velocities and accelerations (R, N, S); returns :func:`per_gripper`'s summary of the Newton solves."""
+    n_rods = q.shape[0]
     scratch = _newton_scratch(q, water, band_width)
+    q_pred = np.empty(q.shape)
+    residual = np.empty((n_rods, q.shape[1] * q.shape[2]))
+    converged = np.empty(n_rods, dtype=np.bool_)
+    iterations = np.empty(n_rods, dtype=np.int64)
+    ratio = np.empty(n_rods)
     for r in range(q.shape[0]):
         _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q)
         newton_rod(r, q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, mass_term,
                    tolerance_inverse, free, max_iterations, converged, iterations, ratio, residual, *scratch)
         _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
+        if midpoint:
+            _midpoint_end_rod(r, q_old, velocity_old, q, velocity)
+    return per_gripper(converged, iterations, ratio, n_fingers)
 
 
 @njit(cache=True, error_model="numpy")

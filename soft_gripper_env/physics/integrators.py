@@ -25,8 +25,6 @@ from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 
-from .rod_3d import rod3d_update_frames
-
 if TYPE_CHECKING:
     from .simulator import RodState, Simulator, StepResult
 
@@ -59,23 +57,7 @@ class ImplicitMidpoint:
     order = 2
 
     def advance(self, sim: Simulator, state: RodState, kbar: np.ndarray, dt: float) -> StepResult:
-        half = sim._advance(state, kbar, 0.5 * dt, state.velocity)
-        middle = half.state
-        q = 2.0 * middle.q - state.q
-        velocity = 2.0 * middle.velocity - state.velocity
-        # the mean acceleration (v₁ − v₀)/Δt is the half step's own, (v_½ − v₀)/(Δt/2)
-        end = evolve(middle, q=q, velocity=velocity, time=state.time + dt)
-        if middle.tangent is not None:  # 3-D: carry the frames on from the midpoint to the end
-            shape = middle.tangent.shape
-            tangent, director = np.empty(shape), np.empty(shape)
-            reference_twist = np.empty(middle.reference_twist.shape)
-            n_rods = sim.n_rods
-            rod3d_update_frames(q.reshape(n_rods, *q.shape[2:]), middle.tangent.reshape(n_rods, *shape[2:]),
-                                middle.director.reshape(n_rods, *shape[2:]),
-                                middle.reference_twist.reshape(n_rods, -1), tangent.reshape(n_rods, *shape[2:]),
-                                director.reshape(n_rods, *shape[2:]), reference_twist.reshape(n_rods, -1))
-            end = evolve(end, tangent=tangent, director=director, reference_twist=reference_twist)
-        return evolve(half, state=end)
+        return sim._advance(state, kbar, 0.5 * dt, state.velocity, midpoint=True)
 
 
 class MidpointTripleJump:

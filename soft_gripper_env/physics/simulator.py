@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .assembly import advance_rods, assemble, finish, newton_solve, per_gripper, predict
+from .assembly import advance_rods, assemble, finish, midpoint_end, newton_solve, per_gripper, predict
 from .config import Scene
 from .contact import (
     PENETRATION_TOLERANCE,
@@ -356,6 +356,14 @@ class Simulator:
         ratio = np.max(np.abs(force.reshape(R, -1)) * self._tolerance_inverse * self._free_mask(held), axis=1)
         return ratio.reshape(self.batch_size, self.n_fingers).max(axis=1)
 
+    def _transported_frames(self, q: np.ndarray, frames: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The 3-D reference frames (tangent, director (R, N − 1, 3), reference twist (R, N)) carried from
+        ``frames`` to the coordinates ``q`` (R, N, 4)."""
+        R, N = self.n_rods, self.disc.n_nodes
+        transported = np.empty((R, N - 1, 3)), np.empty((R, N - 1, 3)), np.empty((R, N))
+        rod3d_update_frames(q, *frames, *transported)
+        return transported
+
     def _frames(self, state: RodState):
         if self.disc.model != "3d":
             return None
@@ -599,26 +607,31 @@ class Simulator:
                        residual)
         return np.repeat(converged, F), np.repeat(iterations, F), np.repeat(ratio, F), residual
 
-    def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray) -> StepResult:
+    def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray,
+                 midpoint: bool = False) -> StepResult:
+        """A backward-Euler step of ``dt`` from ``state`` with the old velocity ``velocity_old`` (zero for a
+        pseudo-step); with ``midpoint``, the implicit midpoint rule's half step, extrapolated to the end of its step
+        of 2·``dt`` (:func:`~.assembly.midpoint_end`)."""
         disc = self.disc
         R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
         q_old, v_old = state.q.reshape(R, N, S), velocity_old.reshape(R, N, S)
         extrapolate = state.acceleration is not None and velocity_old is state.velocity  # not for a pseudo-step
         acceleration_old = state.acceleration.reshape(R, N, S) if extrapolate else self._no_acceleration
-        q_pred, q = np.empty((R, N, S)), np.empty((R, N, S))
+        q = np.empty((R, N, S))
         velocity, acceleration = np.empty(state.q.shape), np.empty(state.q.shape)
         frames_old = self._frames(state)
         body = held = changed = corrector = None
+        end_in_kernel = False
         if self._body is None and self._object is None:  # rods on their own: the whole step in one kernel
-            converged, iterations = np.empty(R, dtype=bool), np.empty(R, dtype=np.int64)
-            ratio, residual = np.empty(R), np.empty((R, disc.n_dofs))
             mass_term, tolerance_inverse = self._per_step(dt)
-            advance_rods(q_old, v_old, acceleration_old, kbar, self._water(state.time, R), dt, self._elastic,
-                         frames_old or self._no_frames, self._force_terms, disc.band_width, mass_term,
-                         tolerance_inverse, self._clamp_free, self.scene.newton.max_iterations, q_pred, q,
-                         velocity.reshape(R, N, S), acceleration.reshape(R, N, S), converged, iterations, ratio,
-                         residual)
+            end_in_kernel = midpoint and frames_old is None  # 3-D frames are carried to the midpoint first
+            summary = advance_rods(q_old, v_old, acceleration_old, kbar, self._water(state.time, R), dt,
+                                   self._elastic, frames_old or self._no_frames, self._force_terms, disc.band_width,
+                                   mass_term, tolerance_inverse, self._clamp_free, self.scene.newton.max_iterations,
+                                   end_in_kernel, self.n_fingers, q, velocity.reshape(R, N, S),
+                                   acceleration.reshape(R, N, S))
         else:
+            q_pred = np.empty((R, N, S))
             predict(q_old, v_old, acceleration_old, dt, q_pred, q)
             if self._body is not None:
                 q, held, changed, corrector, converged, iterations, ratio, residual, body = self._solve_with_body(
@@ -627,19 +640,23 @@ class Simulator:
                 q, held, changed, corrector, converged, iterations, ratio, residual = self._solve_with_contact(
                     state, q, q_old, q_pred, frames_old, kbar, dt)
             finish(q, q_old, v_old, dt, velocity.reshape(R, N, S), acceleration.reshape(R, N, S))
+            summary = per_gripper(converged, iterations, ratio, self.n_fingers)
+        if midpoint and not end_in_kernel:
+            if frames_old is not None:
+                frames_old = self._transported_frames(q, frames_old)  # to the midpoint, whence to the end
+            midpoint_end(q_old, v_old, q, velocity.reshape(R, N, S))
         B, F = self.batch_size, self.n_fingers
-        new_state = RodState(q=q.reshape(state.q.shape), velocity=velocity, time=state.time + dt,
-                             acceleration=acceleration, held=None if held is None else held.reshape(B, F, N))
+        # the mean acceleration over a midpoint step, (v₁ − v₀)/(2·dt), is the half step's own, (v_½ − v₀)/dt
+        new_state = RodState(q=q.reshape(state.q.shape), velocity=velocity,
+                             time=state.time + (2.0 * dt if midpoint else dt), acceleration=acceleration,
+                             held=None if held is None else held.reshape(B, F, N))
         if body is not None:
             offsets, position, body_velocity, orientation, angular_velocity = body
             new_state = evolve(new_state, hold_offset=offsets.reshape(B, F, N, 3), body_position=position,
                                 body_velocity=body_velocity, body_orientation=orientation,
                                 body_angular_velocity=angular_velocity)
         if disc.model == "3d":
-            tangent = np.empty((R, N - 1, 3))
-            director = np.empty((R, N - 1, 3))
-            reference_twist = np.empty((R, N))
-            rod3d_update_frames(q, *frames_old, tangent, director, reference_twist)
+            tangent, director, reference_twist = self._transported_frames(q, frames_old)
             shape = state.q.shape[:3]
             new_state = evolve(new_state, tangent=tangent.reshape(shape[:2] + (N - 1, 3)),
                                 director=director.reshape(shape[:2] + (N - 1, 3)),
@@ -659,7 +676,7 @@ class Simulator:
                 resolved=~changed.reshape(B, F).any(axis=1),
                 palm_reaction=None if body is None else self._body.palm_reaction(
                     body[1], state.body_position, body[3], state.body_orientation, dt))
-        converged, iterations, ratio = per_gripper(converged, iterations, ratio, F)
+        converged, iterations, ratio = summary
         return StepResult(state=new_state, converged=converged, newton_iterations=iterations, residual=ratio,
                           contact=contact, substeps=np.ones(B, dtype=np.int64))
 
