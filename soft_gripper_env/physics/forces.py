@@ -94,6 +94,10 @@ class ForceModel:
         """The water's velocity at every rod (R, D) [m/s] when the model is evaluated on its own: still water."""
         return np.zeros((n_rods, disc.dim))
 
+    def potential_energy(self, disc: Discretization, positions: np.ndarray) -> np.ndarray | None:
+        """Potential energy of a conservative force per rod [J], (R,); None for a force that has none."""
+        return None
+
 
 @dataclass(frozen=True, eq=False)
 class ForceTerms:
@@ -125,10 +129,6 @@ class ForceTerms:
     def arrays(self) -> tuple[np.ndarray, ...]:
         """The terms in the order the compiled kernels take them."""
         return self.node_force, self.damping, self.drag_normal, self.drag_tangential, self.added_mass
-
-    def potential_energy(self, disc: Discretization, positions: np.ndarray) -> np.ndarray | None:
-        """Potential energy of a conservative force per rod [J], (R,); None for a force that has none."""
-        return None
 
 
 @dataclass(frozen=True)

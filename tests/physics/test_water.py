@@ -230,3 +230,28 @@ def test_current_phase_and_each_grippers_clock():
     batch.start_time[1] = 0.75  # gripper 1's episode began at batch time 0.75 s
     np.testing.assert_allclose(batch.at(1.0)[1], current.at(0.25), rtol=1e-14)
     np.testing.assert_allclose(batch.at(1.0)[0], current.at(1.0), rtol=1e-15)
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_dissipative_forces_add_no_potential_energy(model):
+    """Drag, added mass and damping have no potential: a bent finger's mechanical energy in water with all of them
+    equals its energy with only gravity and buoyancy, and the buoyancy's potential is the weight's times −ρ_w/ρ."""
+    from soft_gripper_env.physics import MassProportionalDamping, StokesDrag
+
+    water = paper_scene(model, medium="water")
+    water = replace(water, forces=water.forces + (MassProportionalDamping(), StokesDrag()))
+    sim = Simulator(water)
+    state = sim.initial_state()
+    for _ in range(20):
+        state = sim.step(state, -0.15 * state.time).state
+    conservative = replace(water, forces=tuple(f for f in water.forces if isinstance(f, (Gravity, Buoyancy))))
+    energy = sim.mechanical_energy(state, -0.4)
+    np.testing.assert_allclose(energy, Simulator(conservative).mechanical_energy(state, -0.4), rtol=1e-12)
+    weight_only = replace(water, forces=(Gravity(),))
+    buoyancy_only = replace(water, forces=(Buoyancy(WATER_DENSITY),))
+    elastic = Simulator(replace(water, forces=())).mechanical_energy(state, -0.4)
+    gravity_part = Simulator(weight_only).mechanical_energy(state, -0.4) - elastic
+    buoyancy_part = Simulator(buoyancy_only).mechanical_energy(state, -0.4) - elastic
+    density = water.gripper.finger.material.density
+    np.testing.assert_allclose(buoyancy_part, -gravity_part * WATER_DENSITY / density, rtol=1e-9)
+    assert np.abs(gravity_part).min() > 0
