@@ -146,7 +146,7 @@ class Simulator:
         self._no_acceleration = np.empty((0, 0, 0))
         drag = [f for f in scene.forces if isinstance(f, MorisonDrag)]
         self._currents = CurrentBatch(B) if drag else None
-        self._water_cache: tuple[float, np.ndarray | None] = (math.nan, None)
+        self._water_cache: tuple[float, tuple[np.ndarray, np.ndarray] | None] = (math.nan, None)
         self._object = None
         self._body = None
         obj = scene.grasped_object
@@ -216,14 +216,13 @@ class Simulator:
                                       (self.batch_size, self.n_fingers, n_edges, 3)).copy()
             director = np.zeros_like(tangent)
             director[..., 2] = 1.0  # m1 = +z, so κ1 < 0 bends toward −z
-            state = evolve(state, tangent=tangent, director=director,
-                            reference_twist=np.zeros(q.shape[:3]))
+            state = evolve(state, tangent=tangent, director=director, reference_twist=np.zeros(q.shape[:3]))
         if self._body is not None:
             B, objects = self.batch_size, [s.grasped_object for s in self.scenes]
             centers = np.array([0.5 * (obj.segment[0] + obj.segment[1]) for obj in objects])
             state = evolve(state, held=np.zeros(q.shape[:3], dtype=bool), hold_offset=np.zeros(q.shape[:3] + (3,)),
-                            body_position=centers, body_velocity=np.array([obj.velocity for obj in objects]),
-                            body_orientation=np.tile(np.eye(3), (B, 1, 1)), body_angular_velocity=np.zeros((B, 3)))
+                           body_position=centers, body_velocity=np.array([obj.velocity for obj in objects]),
+                           body_orientation=np.tile(np.eye(3), (B, 1, 1)), body_angular_velocity=np.zeros((B, 3)))
         return state
 
     def world_positions(self, state: RodState) -> np.ndarray:
@@ -378,17 +377,16 @@ class Simulator:
         R = q.shape[0]
         force = np.empty(q.shape)
         band = np.empty((R, disc.n_dofs, disc.band_width + 1))
-        assemble(q, q_old, q_pred, kbar, self._water(time, R), dt, self._elastic, frames_old or self._no_frames,
+        assemble(q, q_old, q_pred, kbar, self._water(time)[1], dt, self._elastic, frames_old or self._no_frames,
                  self._force_terms, hessian, force, band)
         return force, band
 
-    def _water(self, time: float, n_rods: int) -> np.ndarray:
-        """The current at every rod at ``time`` (R, D) [m/s], kept for the Newton iterations of a step; still water
-        in a scene without drag."""
-        if self._water_cache[0] != time or len(self._water_cache[1]) != n_rods:
-            water = (np.zeros((n_rods, self.disc.dim)) if self._currents is None
-                     else rod_water_velocity(self.disc, self._currents.at(time)))
-            self._water_cache = (time, water)
+    def _water(self, time: float) -> tuple[np.ndarray, np.ndarray]:
+        """The current at ``time`` at every gripper (B, 3) and as every rod sees it (R, D) [m/s], kept for the solves
+        of a step; still water in a scene without drag."""
+        if self._water_cache[0] != time:
+            grippers = np.zeros((self.batch_size, 3)) if self._currents is None else self._currents.at(time)
+            self._water_cache = (time, (grippers, rod_water_velocity(self.disc, grippers)))
         return self._water_cache[1]
 
     def _free_mask(self, held: np.ndarray) -> np.ndarray:
@@ -424,7 +422,7 @@ class Simulator:
         ratio = np.full(R, np.inf)
         residual = np.zeros((R, disc.n_dofs))
         mass_term, tolerance_inverse = self._per_step(dt)
-        newton_solve(q, q_old, q_pred, kbar, self._water(time, R), dt, self._elastic, frames_old or self._no_frames,
+        newton_solve(q, q_old, q_pred, kbar, self._water(time)[1], dt, self._elastic, frames_old or self._no_frames,
                      self._force_terms, disc.band_width, mass_term, tolerance_inverse, free, rods,
                      self.scene.newton.max_iterations, converged, iterations, ratio, residual)
         return converged, iterations, ratio, residual
@@ -458,15 +456,14 @@ class Simulator:
             return None
         return held | new_hold, new_hold.any(axis=1)
 
-    def _solve_with_contact(self, state, q_start, q_old, q_pred, frames_old, kbar, dt):
+    def _solve_with_contact(self, state, q, q_old, q_pred, frames_old, kbar, dt):
         """The predictor–corrector (see :mod:`.contact`): solve, release adhesive holds, hold new penetrations, and
         solve the rods that changed again (each from its last solution), until none does or the corrector's budget is
-        spent."""
+        spent. ``q`` (R, N, S) holds Newton's start and receives the solution."""
         disc = self.disc
         R, N, D = self.n_rods, disc.n_nodes, disc.dim
         held = state.held.reshape(R, N).copy() if state.held is not None else np.zeros((R, N), dtype=bool)
         hold_at = q_old[..., :D].copy()  # nodes already held stay where they are
-        q = q_start.copy()
         converged = np.zeros(R, dtype=bool)
         iterations = np.zeros(R, dtype=np.int64)
         ratio = np.full(R, np.inf)
@@ -503,22 +500,20 @@ class Simulator:
         rod_centers = np.stack([(centers @ directions.T).ravel(), np.repeat(centers[:, 2], self.n_fingers)], axis=1)
         return rod_centers, rod_centers, np.sqrt(np.maximum(radius**2 - distance**2, 0.0))
 
-    def _solve_with_body(self, state, q_start, q_old, q_pred, frames_old, kbar, dt):
+    def _solve_with_body(self, state, q, q_old, q_pred, frames_old, kbar, dt):
         """Predictor–corrector contact with a free sphere: each solve moves rods and body together
         (:meth:`_newton_with_body`); new penetrations are held where they entered the body's surface, with their
         offset in the body's frame, and adhesive holds are released, until nothing changes. Each re-solve starts from
         the last solution, so Newton starts a few penetration depths from the new one; restarting from the predictor
         would start a hold far from a body that the impact has slowed, a jump the 3-D coupled solve did not always
-        survive."""
+        survive. ``q`` (R, N, S) holds Newton's start and receives the solution."""
         disc = self.disc
         R, N, D = self.n_rods, disc.n_nodes, disc.dim
         B, F = self.batch_size, self.n_fingers
         held = state.held.reshape(R, N).copy()
         offsets = state.hold_offset.reshape(R, N, 3).copy()
         body_old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
-        c_start, theta_start = body_old[0] + dt * body_old[1], dt * body_old[3]
-        c, theta = c_start.copy(), theta_start.copy()
-        q = q_start.copy()
+        c, theta = body_old[0] + dt * body_old[1], dt * body_old[3]  # the body's predictor
         corrector = np.zeros(R, dtype=np.int64)
         converged = np.zeros(R, dtype=bool)
         iterations = np.zeros(R, dtype=np.int64)
@@ -598,8 +593,8 @@ class Simulator:
         iterations = np.zeros(B, dtype=np.int64)
         ratio = np.full(B, np.inf)
         residual = np.zeros((self.n_rods, disc.n_dofs))
-        water = np.zeros((B, 3)) if self._currents is None else self._currents.at(time)
-        coupled_newton(q, q_old, q_pred, kbar, self._water(time, self.n_rods), dt, self._elastic,
+        water, rod_water = self._water(time)
+        coupled_newton(q, q_old, q_pred, kbar, rod_water, dt, self._elastic,
                        frames_old or self._no_frames, self._force_terms, disc.band_width, mass_term, tolerance_inverse,
                        self._free_mask(held), held, offsets, self._projection, *self._body.arrays(), c, theta,
                        tuple(np.ascontiguousarray(x) for x in body_old), water, self._body_basis(held),
@@ -625,7 +620,7 @@ class Simulator:
         if self._body is None and self._object is None:  # rods on their own: the whole step in one kernel
             mass_term, tolerance_inverse = self._per_step(dt)
             end_in_kernel = midpoint and frames_old is None  # 3-D frames are carried to the midpoint first
-            summary = advance_rods(q_old, v_old, acceleration_old, kbar, self._water(state.time, R), dt,
+            summary = advance_rods(q_old, v_old, acceleration_old, kbar, self._water(state.time)[1], dt,
                                    self._elastic, frames_old or self._no_frames, self._force_terms, disc.band_width,
                                    mass_term, tolerance_inverse, self._clamp_free, self.scene.newton.max_iterations,
                                    end_in_kernel, self.n_fingers, q, velocity.reshape(R, N, S),
@@ -653,14 +648,14 @@ class Simulator:
         if body is not None:
             offsets, position, body_velocity, orientation, angular_velocity = body
             new_state = evolve(new_state, hold_offset=offsets.reshape(B, F, N, 3), body_position=position,
-                                body_velocity=body_velocity, body_orientation=orientation,
-                                body_angular_velocity=angular_velocity)
+                               body_velocity=body_velocity, body_orientation=orientation,
+                               body_angular_velocity=angular_velocity)
         if disc.model == "3d":
             tangent, director, reference_twist = self._transported_frames(q, frames_old)
             shape = state.q.shape[:3]
             new_state = evolve(new_state, tangent=tangent.reshape(shape[:2] + (N - 1, 3)),
-                                director=director.reshape(shape[:2] + (N - 1, 3)),
-                                reference_twist=reference_twist.reshape(shape))
+                               director=director.reshape(shape[:2] + (N - 1, 3)),
+                               reference_twist=reference_twist.reshape(shape))
         contact = None
         if held is not None:
             reaction = np.zeros((R, N, S))
@@ -694,13 +689,13 @@ def _structure(scene: Scene) -> tuple:
 def take_grippers(record, index: np.ndarray):
     """The grippers ``index`` of a state or contact report (every array field has the batch axis first)."""
     return evolve(record, **{name: value[index] for name, value in vars(record).items()
-                              if isinstance(value, np.ndarray)})
+                             if isinstance(value, np.ndarray)})
 
 
 def put_grippers(record, index: np.ndarray, part):
     """A copy of ``record`` whose grippers ``index`` are taken from ``part``."""
     return evolve(record, **{name: _set(value, index, getattr(part, name)) for name, value in vars(record).items()
-                              if isinstance(value, np.ndarray)})
+                             if isinstance(value, np.ndarray)})
 
 
 def _set(array: np.ndarray, index: np.ndarray, values: np.ndarray) -> np.ndarray:
