@@ -147,6 +147,9 @@ class Simulator:
         drag = [f for f in scene.forces if isinstance(f, MorisonDrag)]
         self._currents = CurrentBatch(B) if drag else None
         self._water_cache: tuple[float, tuple[np.ndarray, np.ndarray] | None] = (math.nan, None)
+        if not drag:
+            still = np.zeros((B, 3))
+            self._water_cache = (math.inf, (still, rod_water_velocity(self.disc, still)))  # for all time
         self._object = None
         self._body = None
         obj = scene.grasped_object
@@ -384,8 +387,8 @@ class Simulator:
     def _water(self, time: float) -> tuple[np.ndarray, np.ndarray]:
         """The current at ``time`` at every gripper (B, 3) and as every rod sees it (R, D) [m/s], kept for the solves
         of a step; still water in a scene without drag."""
-        if self._water_cache[0] != time:
-            grippers = np.zeros((self.batch_size, 3)) if self._currents is None else self._currents.at(time)
+        if self._currents is not None and self._water_cache[0] != time:
+            grippers = self._currents.at(time)
             self._water_cache = (time, (grippers, rod_water_velocity(self.disc, grippers)))
         return self._water_cache[1]
 
