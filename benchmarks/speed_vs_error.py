@@ -51,6 +51,7 @@ from soft_gripper_env.physics.config import replace
 HEADER = ["scene", "model", "integrator", "n_nodes", "dt_s", "wall_s_per_sim_s", "max_tip_error_m",
           "steady_tip_z_m"]
 SAMPLE_S = 0.02
+LINE_STYLES = {"implicit_midpoint": "-", "midpoint_triple_jump": "-.", "midpoint_suzuki": ":"}
 GRASP_CURVATURE = 0.25
 """|κ̄| at which the grasp scene's fingers stop closing (dimensionless), holding the sphere below the palm."""
 REFERENCE = {"dt": 2.5e-4, "n_nodes": 80, "integrator": "implicit_midpoint"}
@@ -123,7 +124,7 @@ def grid(quick: bool) -> list[Case]:
     for scene in ("cantilever_damped", "cantilever_undamped"):
         models = ("planar",) if quick else ("planar", "3d")
         nodes = (10, 20) if quick else (10, 20, 40)
-        integrators = ("backward_euler", "implicit_midpoint", "midpoint_triple_jump")
+        integrators = ("backward_euler", "implicit_midpoint", "midpoint_triple_jump", "midpoint_suzuki")
         for model, integrator, n, dt in itertools.product(models, integrators, nodes, steps):
             cases.append(Case(scene, model, "none", integrator, n, dt))
     if not quick:
@@ -192,7 +193,7 @@ def plot(rows, out: Path) -> None:
             series = sorted((r for r in selected if (r[1], r[2], r[3]) == (model, integrator, n)), key=lambda r: r[4])
             errors = np.array([r[6] for r in series])
             walls = np.array([r[5] for r in series])
-            style = {"implicit_midpoint": "-", "midpoint_triple_jump": "-."}.get(integrator, "--")
+            style = LINE_STYLES.get(integrator, "--")
             marker = "o" if model == "planar" else "s"
             line, = ax.loglog(errors, walls, style, marker=marker, ms=4, label=f"{model}, {integrator}, N = {n}")
             for r, e, w in zip(series, errors, walls, strict=True):

@@ -24,7 +24,7 @@ from .validation import check_range
 
 ClampConvention = Literal["paper", "accurate", "free"]
 RodModel = Literal["planar", "3d"]
-Integrator = Literal["backward_euler", "implicit_midpoint", "midpoint_triple_jump"]
+Integrator = Literal["backward_euler", "implicit_midpoint", "midpoint_triple_jump", "midpoint_suzuki"]
 
 WATER_VISCOSITY = 1.0e-3
 """Dynamic viscosity of water at about 20 °C [Pa·s]."""

@@ -7,6 +7,9 @@ name                     order behaviour
 ``implicit_midpoint``    2     symplectic: keeps oscillations at large Δt, with no numerical damping
 ``midpoint_triple_jump`` 4     three midpoint steps of γ₁Δt, γ₂Δt, γ₁Δt (Yoshida's symmetric composition):
                                symplectic, and its phase error falls as Δt⁴; three solves per step
+``midpoint_suzuki``      4     five midpoint steps of pΔt, pΔt, (1 − 4p)Δt, pΔt, pΔt (Suzuki's fractal
+                               composition): as the triple jump, with every substep shorter than Δt and a
+                               smaller error at large Δt; five solves per step
 ======================== ===== =======================================================================
 
 The implicit midpoint rule, M·(v₁ − v₀)/Δt = f(q_½, v_½) with q_½ = (q₀ + q₁)/2 and v_½ = (q₁ − q₀)/Δt, is exactly a
@@ -17,6 +20,12 @@ The triple jump composes the midpoint rule Φ as Φ(γ₁Δt)∘Φ(γ₂Δt)∘�
 γ₂ = 1 − 2γ₁ ≈ −1.702 (H. Yoshida, Phys. Lett. A 150, 1990): a symmetric method of order 2 composed this way is of
 order 4. The middle step runs backward in time, so a dissipative force (drag, damping) is anti-dissipative there;
 the method suits conservative or lightly damped scenes, where the midpoint rule's phase drift is what limits Δt.
+Its substeps of 1.35·Δt and −1.70·Δt are longer than the step itself, so its error grows fast with Δt. Suzuki's
+five-step composition, p = 1/(4 − 4^⅓) ≈ 0.4145 and 1 − 4p ≈ −0.658 (M. Suzuki, Phys. Lett. A 146, 1990), is
+of the same order with substeps all shorter than Δt and a smaller backward one: it keeps the undamped cantilever
+within 2.4 % at Δt = 2e-2 s, where the triple jump is off by 29 % (tests/physics/test_integrators.py). A second-order
+method cannot do that: the midpoint rule's period is too long by (ωΔt)²/12 per period, which over ten 5 Hz
+periods at Δt = 1e-2 s is a quarter of the oscillation.
 """
 
 from __future__ import annotations
@@ -60,27 +69,30 @@ class ImplicitMidpoint:
         return sim._advance(state, kbar, 0.5 * dt, state.velocity, midpoint=True)
 
 
-class MidpointTripleJump:
-    """Yoshida's fourth-order symmetric composition of three implicit-midpoint steps."""
+class MidpointComposition:
+    """A symmetric composition of implicit-midpoint steps of ``fractions``·Δt (summing to 1), of order ``order``."""
 
-    order = 4
-    outer = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
-    inner = 1.0 - 2.0 * outer
+    def __init__(self, fractions: tuple[float, ...], order: int) -> None:
+        self.fractions, self.order = fractions, order
 
     def advance(self, sim: Simulator, state: RodState, kbar: np.ndarray, dt: float) -> StepResult:
         results = []
         current = state
-        for fraction in (self.outer, self.inner, self.outer):
+        for fraction in self.fractions:
             results.append(MIDPOINT.advance(sim, current, kbar, fraction * dt))
             current = results[-1].state
         end = evolve(current, time=state.time + dt, acceleration=(current.velocity - state.velocity) / dt)
         return evolve(results[-1], state=end, converged=np.logical_and.reduce([r.converged for r in results]),
-                       newton_iterations=sum(r.newton_iterations for r in results),
-                       residual=np.maximum.reduce([r.residual for r in results]),
-                       substeps=np.maximum.reduce([r.substeps for r in results]))
+                      newton_iterations=sum(r.newton_iterations for r in results),
+                      residual=np.maximum.reduce([r.residual for r in results]),
+                      substeps=np.maximum.reduce([r.substeps for r in results]))
 
 
 MIDPOINT = ImplicitMidpoint()
+_YOSHIDA = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+_SUZUKI = 1.0 / (4.0 - 4.0 ** (1.0 / 3.0))
 INTEGRATORS = {"backward_euler": BackwardEuler(), "implicit_midpoint": MIDPOINT,
-               "midpoint_triple_jump": MidpointTripleJump()}
+               "midpoint_triple_jump": MidpointComposition((_YOSHIDA, 1.0 - 2.0 * _YOSHIDA, _YOSHIDA), order=4),
+               "midpoint_suzuki": MidpointComposition((_SUZUKI, _SUZUKI, 1.0 - 4.0 * _SUZUKI, _SUZUKI, _SUZUKI),
+                                                      order=4)}
 """Every integrator, by the name a :class:`~.config.Scene` gives in ``integrator``."""

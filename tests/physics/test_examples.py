@@ -122,7 +122,8 @@ def test_speed_vs_error_quick(tmp_path):
     assert list(rows[0]) == ["scene", "model", "integrator", "n_nodes", "dt_s", "wall_s_per_sim_s", "max_tip_error_m",
                              "steady_tip_z_m"]
     assert {row["scene"] for row in rows} == {"cantilever_damped", "cantilever_undamped"}
-    assert {row["integrator"] for row in rows} == {"backward_euler", "implicit_midpoint", "midpoint_triple_jump"}
+    assert {row["integrator"] for row in rows} == {"backward_euler", "implicit_midpoint", "midpoint_triple_jump",
+                                                     "midpoint_suzuki"}
     errors = {(r["scene"], r["integrator"], r["n_nodes"], r["dt_s"]): float(r["max_tip_error_m"]) for r in rows}
     # on the damped cantilever, errors fall as Δt falls, and midpoint beats backward Euler at Δt = 1e-2
     assert errors[("cantilever_damped", "implicit_midpoint", "20", "0.001")] < \
@@ -132,6 +133,8 @@ def test_speed_vs_error_quick(tmp_path):
     # undamped at Δt = 1e-2: the triple jump keeps the phase that the midpoint rule loses
     assert errors[("cantilever_undamped", "midpoint_triple_jump", "20", "0.01")] < \
         0.3 * errors[("cantilever_undamped", "implicit_midpoint", "20", "0.01")]
+    assert errors[("cantilever_undamped", "midpoint_suzuki", "20", "0.02")] < \
+        0.3 * errors[("cantilever_undamped", "midpoint_triple_jump", "20", "0.02")]
     steady = [float(r["steady_tip_z_m"]) for r in rows if r["scene"] == "cantilever_damped" and r["dt_s"] == "0.001"]
     assert all(-0.0152 < z < -0.0145 for z in steady)  # settles near the elastica's 14.95 mm
     assert (tmp_path / "cantilever_damped.png").stat().st_size > 0
