@@ -35,7 +35,7 @@ from .contact import (
 from .discretization import Discretization
 from .forces import ForceTerms
 from .hydrodynamics import Current, CurrentBatch, MorisonDrag, rod_water_velocity
-from .integrators import INTEGRATORS, evolve
+from .integrators import INTEGRATORS, evolve, record
 from .rigid_body import BodyModel, coupled_newton, rotation_exp
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
@@ -645,9 +645,9 @@ class Simulator:
             midpoint_end(q_old, v_old, q, velocity.reshape(R, N, S))
         B, F = self.batch_size, self.n_fingers
         # the mean acceleration over a midpoint step, (v₁ − v₀)/(2·dt), is the half step's own, (v_½ − v₀)/dt
-        new_state = RodState(q=q.reshape(state.q.shape), velocity=velocity,
-                             time=state.time + (2.0 * dt if midpoint else dt), acceleration=acceleration,
-                             held=None if held is None else held.reshape(B, F, N))
+        new_state = evolve(state, q=q.reshape(state.q.shape), velocity=velocity,
+                           time=state.time + (2.0 * dt if midpoint else dt), acceleration=acceleration,
+                           held=None if held is None else held.reshape(B, F, N))
         if body is not None:
             offsets, position, body_velocity, orientation, angular_velocity = body
             new_state = evolve(new_state, hold_offset=offsets.reshape(B, F, N, 3), body_position=position,
@@ -675,8 +675,8 @@ class Simulator:
                 palm_reaction=None if body is None else self._body.palm_reaction(
                     body[1], state.body_position, body[3], state.body_orientation, dt))
         converged, iterations, ratio = summary
-        return StepResult(state=new_state, converged=converged, newton_iterations=iterations, residual=ratio,
-                          contact=contact, substeps=np.ones(B, dtype=np.int64))
+        return record(StepResult, state=new_state, converged=converged, newton_iterations=iterations, residual=ratio,
+                      contact=contact, substeps=np.full(B, 1))
 
 
 def _structure(scene: Scene) -> tuple:
