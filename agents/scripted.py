@@ -1,4 +1,5 @@
-"""Scripted policies: the paper's linear κ̄(t) ramp, and a reactive controller of each finger's contact force.
+"""Scripted policies: the paper's linear κ̄(t) ramp, and a reactive controller that closes each finger until it
+touches and then squeezes by a set curvature.
 
 Both act on observations of :class:`soft_gripper_env.env.SoftGripperUnderwaterEnv` and return actions in [−1, 1].
 """
@@ -9,6 +10,7 @@ import numpy as np
 
 from soft_gripper_env.env import observation_slices
 from soft_gripper_env.grasp_task import GraspTask
+from soft_gripper_env.physics.validation import check_range
 
 PAPER_RATE = -0.15
 """The paper's natural-curvature rate [1/s]: κ̄(t) = −0.15·t."""
@@ -29,27 +31,47 @@ class RampPolicy:
 
 
 class ReactivePolicy:
-    """The paper's ramp with contact-force feedback. All fingers close together at the paper's rate until every
-    finger presses at least ``touch_force`` [N] (the object is caged), or one presses ``force_band[0]``; they
-    hold κ̄ from there, and open at ``release`` (an action) while a finger presses more than ``force_band[1]``.
-    So a delicate object is held near the task's fragility threshold, where the ramp keeps squeezing."""
+    """The paper's ramp with contact feedback, finger by finger. Each finger closes at the paper's rate until it
+    touches the object (its normal reactions sum to at least ``touch_force`` [N]), and then waits. Once all three
+    touch, the object is caged: each finger presses on to ``squeeze`` (dimensionless) below the natural curvature at
+    which it touched, at no more than ``press_rate`` [1/s], and holds there.
 
-    def __init__(self, task: GraspTask | None = None, touch_force: float = 0.05,
-                 force_band: tuple[float, float] = (0.45, 0.6), release: float = 0.3) -> None:
+    The squeeze is set in curvature, not in force: stick contact makes a finger's force jump from one control
+    interval to the next, and a controller chasing it loosens and tightens the grip in turn, while a fixed
+    curvature past the touch holds a steady, moderate preload (a few newtons at most, against the ramp's ten or
+    more). The policy remembers the touch curvatures of the episode it is acting in; an observation with κ̄ = 0 on
+    every finger (every episode starts straight) begins a new one. It acts on one observation (obs_dim,) or a batch
+    (B, obs_dim), as from a vector of environments; a batch's row k is always episode slot k.
+    """
+
+    def __init__(self, task: GraspTask | None = None, touch_force: float = 0.01, squeeze: float = 0.015,
+                 press_rate: float = 0.05) -> None:
         self.task = task or GraspTask()
-        low, high = force_band
-        if not 0.0 < low < high <= 100.0:
-            raise ValueError(f"force_band = {force_band!r} N must satisfy 0 < low < high ≤ 100 N")
-        if not 0.0 < touch_force <= low:
-            raise ValueError(f"touch_force = {touch_force!r} N is outside the allowed range (0, {low:g}] N")
-        self.touch_force, self.force_band, self.release = touch_force, (float(low), float(high)), release
-        self._forces = observation_slices(self.task)["normal_forces"]
+        check_range("ReactivePolicy", "touch_force", touch_force, "N", 0.0, 100.0)
+        check_range("ReactivePolicy", "squeeze", squeeze, "(dimensionless)", 0.0, -self.task.curvature_range[0],
+                    low_inclusive=True)
+        check_range("ReactivePolicy", "press_rate", press_rate, "1/s", 0.0, self.task.max_curvature_rate)
+        self.touch_force, self.squeeze, self.press_rate = touch_force, squeeze, press_rate
+        layout = observation_slices(self.task)
+        self._forces, self._curvature = layout["normal_forces"], layout["natural_curvature"]
         self._paper_action = PAPER_RATE / self.task.max_curvature_rate
+        self._touched_at = np.full((0, 3), np.nan)  # κ̄ at which each finger first touched; NaN: not yet
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         observation = np.asarray(observation)
-        force = observation[..., self._forces].reshape(observation.shape[:-1] + (3, -1)).sum(axis=-1)
-        closing = (force.min(axis=-1) < self.touch_force) & (force.max(axis=-1) < self.force_band[0])
-        rate = np.where(closing, self._paper_action, np.where(force.max(axis=-1) > self.force_band[1],
-                                                              self.release, 0.0))
-        return np.repeat(np.asarray(rate, dtype=np.float32)[..., None], 3, axis=-1)
+        batch = observation.reshape(-1, observation.shape[-1])
+        force = batch[:, self._forces].reshape(len(batch), 3, -1).sum(axis=-1)
+        curvature = batch[:, self._curvature].astype(float)
+        if len(self._touched_at) != len(batch):
+            self._touched_at = np.full((len(batch), 3), np.nan)
+        self._touched_at[(curvature == 0.0).all(axis=1)] = np.nan  # a new episode
+        touching = np.isnan(self._touched_at) & (force >= self.touch_force)
+        self._touched_at[touching] = curvature[touching]
+        touched = ~np.isnan(self._touched_at)
+        caged = touched.all(axis=1, keepdims=True)
+        # the action that reaches the target within one control interval, at most the press rate
+        per_action = self.task.max_curvature_rate * self.task.control_dt
+        limit = self.press_rate / self.task.max_curvature_rate
+        press = np.clip((self._touched_at - self.squeeze - curvature) / per_action, -limit, limit)
+        action = np.where(~touched, self._paper_action, np.where(caged, np.nan_to_num(press), 0.0))
+        return action.astype(np.float32).reshape(observation.shape[:-1] + (3,))
