@@ -201,12 +201,21 @@ def object_in_rod_frames(obj: GraspedObject, finger_directions: np.ndarray,
     return centers, centers, radius
 
 
-def closest_points(positions: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
-    """The point of each rod's segment (start, end: (R, D)) closest to each node (R, N, D) [m]."""
-    axis = end - start
-    length2 = np.maximum(np.sum(axis**2, axis=-1), 1e-300)
-    along = np.clip(np.einsum("rnd,rd->rn", positions - start[:, None, :], axis) / length2[:, None], 0.0, 1.0)
-    return start[:, None, :] + along[..., None] * axis[:, None, :]
+@njit(cache=True, error_model="numpy")
+def normal_reactions(positions, reactions, starts, ends):
+    """The component of each node's reaction (R, N, D) [N] along the outward normal of its rod's object there (the
+    direction from the nearest point of the segment ``starts``–``ends`` (R, D) to the node (R, N, D)), (R, N)."""
+    n_rods, n_nodes, dim = positions.shape
+    normal = np.empty((n_rods, n_nodes))
+    nearest = np.empty(dim)
+    for r in range(n_rods):
+        for i in range(n_nodes):
+            distance = _distance_to_segment(positions[r, i], starts[r], ends[r], nearest)
+            along = 0.0
+            for k in range(dim):
+                along += reactions[r, i, k] * (positions[r, i, k] - nearest[k])
+            normal[r, i] = along / distance
+    return normal
 
 
 def reachable(obj: GraspedObject, finger_directions: np.ndarray, length: float, planar: bool) -> np.ndarray:
@@ -215,12 +224,18 @@ def reachable(obj: GraspedObject, finger_directions: np.ndarray, length: float, 
     return within_reach(*object_in_rod_frames(obj, finger_directions, planar), length)
 
 
-def within_reach(starts: np.ndarray, ends: np.ndarray, radii: np.ndarray, length: float) -> np.ndarray:
+@njit(cache=True, error_model="numpy")
+def within_reach(starts, ends, radii, length):
     """Which rods (R,) can touch an object given as they see it (segment ends (R, D), radius (R,)): the object
     must exist in the rod's frame (radius > 0) and its segment lie within ``length`` + radius of the palm, the
     rods' origin."""
-    palm = closest_points(np.zeros((len(starts), 1, starts.shape[1])), starts, ends)[:, 0]
-    return (np.linalg.norm(palm, axis=1) < length + radii) & (radii > 0)
+    n_rods, dim = starts.shape
+    reach = np.empty(n_rods, dtype=np.bool_)
+    palm = np.zeros(dim)
+    nearest = np.empty(dim)
+    for r in range(n_rods):
+        reach[r] = radii[r] > 0.0 and _distance_to_segment(palm, starts[r], ends[r], nearest) < length + radii[r]
+    return reach
 
 
 @njit(cache=True, error_model="numpy")

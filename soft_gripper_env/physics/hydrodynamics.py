@@ -107,9 +107,10 @@ def rod_water_velocity(disc: Discretization, water_velocity: np.ndarray) -> np.n
     vertical plane (planar; the component across the plane would push a finger that cannot move that way)."""
     if disc.dim == 3:
         return np.repeat(water_velocity, len(disc.finger_directions), axis=0)
-    along = water_velocity @ disc.finger_directions.T  # (B, F)
-    vertical = np.broadcast_to(water_velocity[:, 2:3], along.shape)
-    return np.stack([along, vertical], axis=-1).reshape(-1, 2)
+    rods = np.empty((len(water_velocity), len(disc.finger_directions), 2))
+    rods[..., 0] = water_velocity @ disc.finger_directions.T
+    rods[..., 1] = water_velocity[:, 2:3]
+    return rods.reshape(-1, 2)
 
 
 def _edge_diameter(disc: Discretization) -> np.ndarray:

@@ -26,8 +26,8 @@ from .config import Scene
 from .contact import (
     PENETRATION_TOLERANCE,
     ContactReport,
-    closest_points,
     find_penetrations,
+    normal_reactions,
     object_in_rod_frames,
     reachable,
     within_reach,
@@ -156,6 +156,8 @@ class Simulator:
         if obj is not None and obj.free:
             self._body = BodyModel(scene.forces, B, scene.contact.palm_stiffness, scene.contact.palm_radius)
             directions = self.disc.finger_directions
+            self._plane_normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(len(directions))], axis=1)
+            """Normal of each finger's vertical plane (F, 3)."""
             if scene.model == "3d":
                 projection = np.broadcast_to(np.eye(3), (len(directions), 3, 3))
             else:
@@ -264,11 +266,14 @@ class Simulator:
         if isinstance(natural_curvature, (float, int)) and abs(natural_curvature) <= NATURAL_CURVATURE_LIMIT:
             return np.full(self.n_rods, float(natural_curvature))  # the common scalar case, fast
         kbar = np.asarray(natural_curvature, dtype=float)
-        try:
-            kbar = np.broadcast_to(kbar, (self.batch_size, self.n_fingers))
-        except ValueError:
-            raise ValueError(f"natural_curvature has shape {kbar.shape}; expected a scalar, (F,) = "
-                             f"({self.n_fingers},) or (B, F) = ({self.batch_size}, {self.n_fingers})") from None
+        if kbar.shape != (self.batch_size, self.n_fingers):
+            try:
+                kbar = np.broadcast_to(kbar, (self.batch_size, self.n_fingers))
+            except ValueError:
+                raise ValueError(f"natural_curvature has shape {kbar.shape}; expected a scalar, (F,) = "
+                                 f"({self.n_fingers},) or (B, F) = ({self.batch_size}, {self.n_fingers})") from None
+        if np.abs(kbar).max() <= NATURAL_CURVATURE_LIMIT:  # False for NaN too
+            return np.ascontiguousarray(kbar).reshape(-1)
         if not np.all(np.isfinite(kbar)):
             raise ValueError("natural_curvature (dimensionless) must be finite")
         if np.abs(kbar).max() > NATURAL_CURVATURE_LIMIT:
@@ -435,8 +440,7 @@ class Simulator:
         penetrate the object (their hold points written into ``hold_at``), and which rods changed (R,)."""
         R, N, S, D = self.n_rods, self.disc.n_nodes, self.disc.stride, self.disc.dim
         reaction = residual.reshape(R, N, S)[..., :D] * held[..., None]
-        outward = q[..., :D] - closest_points(q[..., :D], starts, ends)
-        normal_reaction = np.sum(reaction * outward, axis=-1) / np.linalg.norm(outward, axis=-1)
+        normal_reaction = normal_reactions(q[..., :D], reaction, starts, ends)
         # a reaction is known to Newton's tolerance: one pulling by less is zero, and releasing it would only cycle
         adhesive = held & (normal_reaction < -self._force_tolerance)
         new_hold = np.zeros((R, N), dtype=bool)
@@ -493,14 +497,14 @@ class Simulator:
         """A free body at ``centers`` (B, 3) turned by ``orientations`` (B, 3, 3) as each rod sees it: its segment's
         ends (R, D) and (R, D), and its radius (R,)."""
         radius = np.repeat(self._body.radius, self.n_fingers)
-        directions = self.disc.finger_directions
         if self.disc.dim == 3:
             ends = [np.repeat(centers + np.einsum("bij,bj->bi", orientations, point), self.n_fingers, axis=0)
                     for point in self._body.segment]
             return ends[0], ends[1], radius
-        normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(self.n_fingers)], axis=1)
-        distance = (centers @ normals.T).ravel()
-        rod_centers = np.stack([(centers @ directions.T).ravel(), np.repeat(centers[:, 2], self.n_fingers)], axis=1)
+        distance = (centers @ self._plane_normals.T).ravel()
+        rod_centers = np.empty((self.n_rods, 2))
+        rod_centers[:, 0] = (centers @ self.disc.finger_directions.T).ravel()
+        rod_centers[:, 1] = np.repeat(centers[:, 2], self.n_fingers)
         return rod_centers, rod_centers, np.sqrt(np.maximum(radius**2 - distance**2, 0.0))
 
     def _solve_with_body(self, state, q, q_old, q_pred, frames_old, kbar, dt):
@@ -572,8 +576,7 @@ class Simulator:
             basis[:, 3:, 3:] = np.eye(3)
             return basis
         touching = held.reshape(B, F, -1).any(axis=2)
-        directions = self.disc.finger_directions
-        normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(F)], axis=1)
+        normals = self._plane_normals
         first = normals[np.argmax(touching, axis=1)]  # (B, 3): a touching finger's plane normal
         parallel = np.all(~touching | (np.abs(np.abs(first @ normals.T) - 1.0) < 1e-9), axis=1)
         free = ~touching.any(axis=1)
@@ -664,12 +667,10 @@ class Simulator:
             reaction = np.zeros((R, N, S))
             reaction[..., :D] = residual.reshape(R, N, S)[..., :D] * held[..., None]
             starts, ends = self._object[:2] if body is None else self._body_in_rod_frames(body[1], body[3])[:2]
-            outward = q[..., :D] - closest_points(q[..., :D], starts, ends)
-            outward /= np.linalg.norm(outward, axis=-1, keepdims=True)
             contact = ContactReport(
                 held=held.reshape(B, F, N),
                 reaction=disc.world_positions(reaction.reshape(B, F, N, S)),
-                normal_reaction=np.sum(reaction[..., :D] * outward, axis=-1).reshape(B, F, N),
+                normal_reaction=normal_reactions(q[..., :D], reaction[..., :D], starts, ends).reshape(B, F, N),
                 corrector_iterations=corrector.reshape(B, F).max(axis=1),
                 resolved=~changed.reshape(B, F).any(axis=1),
                 palm_reaction=None if body is None else self._body.palm_reaction(

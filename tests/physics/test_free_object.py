@@ -216,7 +216,7 @@ def test_fingers_close_on_a_free_capsule():
     and no penetration, and the fingers hold it. Finger 1 closes along the capsule's axis, where a node would have
     to slide: stick contact may cycle there and spend the corrector's budget (docs/contact.md), at most twice; every
     other step ends with compressive holds."""
-    from soft_gripper_env.physics.contact import closest_points
+    from test_contact import segment_distance
 
     capsule = Capsule(0.04, (0.0, -0.05, -0.1), (0.0, 0.05, -0.1), density=1100.0)
     sim = Simulator(paper_scene("3d", medium="water", grasped_object=capsule))
@@ -231,7 +231,7 @@ def test_fingers_close_on_a_free_capsule():
         state = result.state
         ends = [np.repeat(state.body_position + state.body_orientation[0] @ p, 3, axis=0) for p in capsule_ends]
         x = sim.world_positions(state)[0]
-        distance = np.linalg.norm(x - closest_points(x, ends[0], ends[1]), axis=-1)
+        distance = segment_distance(x, ends[0], ends[1])
         assert distance.min() >= capsule.radius - PENETRATION_TOLERANCE
         np.testing.assert_allclose(distance[state.held[0]], capsule.radius, atol=1e-9)
         assert not result.contact.resolved[0] or np.all(result.contact.normal_reaction[state.held] >= 0)
