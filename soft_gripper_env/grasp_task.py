@@ -306,12 +306,13 @@ class GraspBatch:
             else:  # the batch's clock runs on for all
                 self.state = replace(put_grippers(self.state, index, take_grippers(result.state, index)),
                                      time=result.state.time)
-            if result.contact is not None:
-                impulse[keep] += np.maximum(result.contact.normal_reaction[keep], 0.0) * task.physics_dt
-            iterations[keep] += result.newton_iterations[keep]
-            self.natural_curvature[keep] = np.clip(self.natural_curvature[keep] + rate[keep] * task.physics_dt,
-                                                   low, high)
-            self.time[keep] += task.physics_dt
+            step = np.where(keep, task.physics_dt, 0.0)  # the time each episode advanced [s], (B,)
+            if result.contact is not None:  # a failed episode's reactions may be NaN: masked, not multiplied
+                impulse += np.where(keep[:, None, None], np.maximum(result.contact.normal_reaction, 0.0), 0.0) * \
+                    task.physics_dt
+            iterations += np.where(keep, result.newton_iterations, 0)
+            self.natural_curvature = np.clip(self.natural_curvature + rate * step[:, None], low, high)
+            self.time += step
             running = keep
         self.newton_iterations = np.where(active, iterations, self.newton_iterations)
         self.normal_force[active] = impulse[active] / task.control_dt

@@ -511,3 +511,35 @@ def coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, fram
                 c[b, k] += step[k]
                 theta[b, k] += step[3 + k]
             iterations[b] += 1
+
+
+@njit(cache=True, error_model="numpy")
+def planar_body_basis(held, plane_normals):
+    """The motions a free body held by planar fingers may make (see ``Simulator._body_basis``), (B, 6, 6): any
+    translation; any rotation while no finger touches; while every touching finger's plane has the same normal,
+    rotation about it; else none. ``held`` (R, N) marks held nodes, ``plane_normals`` (F, 3) the fingers' planes."""
+    n_fingers = plane_normals.shape[0]
+    n_grippers = held.shape[0] // n_fingers
+    basis = np.zeros((n_grippers, 6, 6))
+    for b in range(n_grippers):
+        for k in range(3):
+            basis[b, k, k] = 1.0
+        first = -1
+        parallel = True
+        for f in range(n_fingers):
+            if not held[b * n_fingers + f].any():
+                continue
+            if first < 0:
+                first = f
+            else:
+                dot = 0.0
+                for k in range(3):
+                    dot += plane_normals[first, k] * plane_normals[f, k]
+                parallel &= abs(abs(dot) - 1.0) < 1e-9
+        if first < 0:
+            for k in range(3, 6):
+                basis[b, k, k] = 1.0
+        elif parallel:
+            for k in range(3):
+                basis[b, 3 + k, 3] = plane_normals[first, k]
+    return basis

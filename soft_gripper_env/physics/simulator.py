@@ -36,7 +36,7 @@ from .discretization import Discretization
 from .forces import ForceTerms
 from .hydrodynamics import Current, CurrentBatch, MorisonDrag, rod_water_velocity
 from .integrators import INTEGRATORS, evolve, record
-from .rigid_body import BodyModel, coupled_newton, rotation_exp
+from .rigid_body import BodyModel, coupled_newton, planar_body_basis, rotation_exp
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
 
@@ -166,6 +166,7 @@ class Simulator:
             force_tolerance = self._force_tolerance
             length = scene.gripper.finger.length
             self._body_tolerance = np.repeat([force_tolerance, force_tolerance * length], 3)  # [N], [N·m]
+            self._any_motion = np.tile(np.eye(6), (B, 1, 1))
         elif obj is not None:
             R, D = self.n_rods, self.disc.dim
             self._object = (np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), np.zeros(R, dtype=bool))
@@ -569,21 +570,9 @@ class Simulator:
         """Basis (B, 6, 6) of the motions a free body may make, padded with zero columns. In 3-D, any. With planar
         fingers, any translation, and only rotations about the normal of every touching finger's plane (a rotation
         about another axis would carry held points out of a plane the finger cannot leave)."""
-        B, F = self.batch_size, self.n_fingers
-        basis = np.zeros((B, 6, 6))
-        basis[:, :3, :3] = np.eye(3)
         if self.disc.dim == 3:
-            basis[:, 3:, 3:] = np.eye(3)
-            return basis
-        touching = held.reshape(B, F, -1).any(axis=2)
-        normals = self._plane_normals
-        first = normals[np.argmax(touching, axis=1)]  # (B, 3): a touching finger's plane normal
-        parallel = np.all(~touching | (np.abs(np.abs(first @ normals.T) - 1.0) < 1e-9), axis=1)
-        free = ~touching.any(axis=1)
-        basis[free, 3:, 3:] = np.eye(3)
-        one_axis = parallel & ~free
-        basis[one_axis, 3:, 3] = first[one_axis]
-        return basis
+            return self._any_motion
+        return planar_body_basis(held, self._plane_normals)
 
     def _newton_with_body(self, q, q_old, q_pred, frames_old, kbar, time, dt, held, offsets, body_old, c, theta,
                           grippers):
