@@ -98,11 +98,11 @@ class SoftGripperUnderwaterEnv(gym.Env):
     index   meaning                                                    unit
     ======  =========================================================  =====
     0–2     natural-curvature rate of finger k, × ``max_curvature_rate`` 1/s
-            (1 1/s); negative closes the finger
+            (0.5 1/s); negative closes the finger
     ======  =========================================================  =====
 
-    κ̄ is integrated every physics step and saturates at ``curvature_range`` (−0.3 to 0: the maximum pressure, and
-    no pressure). Finite values outside [−1, 1] are clipped. NaN, inf, a wrong shape or a non-numeric action raise
+    κ̄ is integrated every physics step and saturates at ``curvature_range`` (−0.2 to 0: the maximum pressure, which
+    curls a finger's natural shape through about 205°, and no pressure). Finite values outside [−1, 1] are clipped. NaN, inf, a wrong shape or a non-numeric action raise
     ``ValueError``.
 
     **Observation** ``Box(float32)``, in this order (F = 3 fingers, N = 20 nodes; D = 2 for the planar model, where

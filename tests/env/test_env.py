@@ -14,7 +14,12 @@ from hypothesis import strategies as st
 
 import soft_gripper_env
 from agents.scripted import PAPER_RATE, RampPolicy, ReactivePolicy
-from soft_gripper_env.env import SoftGripperUnderwaterEnv, SoftGripperUnderwaterVectorEnv, observation_slices
+from soft_gripper_env.env import (
+    DEFAULT_MAX_EPISODE_STEPS,
+    SoftGripperUnderwaterEnv,
+    SoftGripperUnderwaterVectorEnv,
+    observation_slices,
+)
 from soft_gripper_env.grasp_task import GraspTask
 from soft_gripper_env.physics import PAPER_BALL, paper_scene, run_ramp
 from soft_gripper_env.physics.config import replace
@@ -379,3 +384,18 @@ def test_human_render_mode_draws_without_a_display(monkeypatch):
     assert image.get_array().shape == (480, 480, 3)
     env.close()
     assert env.unwrapped._window is None
+
+
+def test_spec_sheet_quotes_the_task_defaults():
+    """The env's docstring is its spec sheet: the numbers it quotes must be the defaults it runs with."""
+    sheet = " ".join(SoftGripperUnderwaterEnv.__doc__.split())
+    task = GraspTask()
+    low, high = task.curvature_range
+    quoted = [f"({task.max_curvature_rate:g} 1/s)", f"({low:g} to {high:g}".replace("-", "−"),
+              f"within {task.hold_distance:g} m of the grasp point", f"slower than {task.rest_speed:g} m/s",
+              f"for the last {task.success_duration:g} s", f"more than {task.lost_distance:g} m",
+              f"fragility threshold {task.fragile_force:g} N", f"radius ({task.object_radius[0]:g}–"
+              f"{task.object_radius[1]:g} m)", f"{DEFAULT_MAX_EPISODE_STEPS} steps = "
+              f"{DEFAULT_MAX_EPISODE_STEPS * task.control_dt:g} s"]
+    missing = [text for text in quoted if text not in sheet]
+    assert not missing, missing
