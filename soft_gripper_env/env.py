@@ -102,8 +102,8 @@ class SoftGripperUnderwaterEnv(gym.Env):
     ======  =========================================================  =====
 
     κ̄ is integrated every physics step and saturates at ``curvature_range`` (−0.2 to 0: the maximum pressure, which
-    curls a finger's natural shape through about 205°, and no pressure). Finite values outside [−1, 1] are clipped. NaN, inf, a wrong shape or a non-numeric action raise
-    ``ValueError``.
+    curls a finger's natural shape through about 205°, and no pressure). Finite values outside [−1, 1] are clipped.
+    NaN, inf, a wrong shape or a non-numeric action raise ``ValueError``.
 
     **Observation** ``Box(float32)``, in this order (F = 3 fingers, N = 20 nodes; D = 2 for the planar model, where
     positions are (s, z) in each finger's vertical plane, s along the finger's direction from the palm centre; D = 3
