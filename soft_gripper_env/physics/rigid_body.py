@@ -39,6 +39,7 @@ import numpy as np
 from numba import njit
 
 from .assembly import assemble_rod
+from .contact import find_penetrations, normal_reactions, within_reach
 from .forces import Buoyancy, Gravity
 from .hydrodynamics import AddedMass, MorisonDrag
 from .linalg import factor_banded_symmetric, solve_factored
@@ -254,19 +255,6 @@ def _rotation_exp(theta, out):
         for j in range(3):
             kk = k[i, 0] * k[0, j] + k[i, 1] * k[1, j] + k[i, 2] * k[2, j]
             out[i, j] = (1.0 if i == j else 0.0) + a * k[i, j] + b * kk
-
-
-@njit(cache=True, error_model="numpy")
-def _rotations(theta, out):
-    for b in range(theta.shape[0]):
-        _rotation_exp(theta[b], out[b])
-
-
-def rotation_exp(theta: np.ndarray) -> np.ndarray:
-    """Rotation matrices exp([θ]×) of rotation vectors (B, 3) [rad], by Rodrigues' formula."""
-    out = np.empty((len(theta), 3, 3))
-    _rotations(np.ascontiguousarray(theta, dtype=float), out)
-    return out
 
 
 @njit(cache=True, error_model="numpy")
@@ -543,3 +531,156 @@ def planar_body_basis(held, plane_normals):
             for k in range(3):
                 basis[b, 3 + k, 3] = plane_normals[first, k]
     return basis
+
+
+@njit(cache=True, error_model="numpy")
+def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finger_directions, plane_normals, starts,
+                       ends, radii):
+    """Each gripper's free body (centre ``c`` (B, 3), ``orientation`` (B, 3, 3), segment ends in its frame (B, 3)
+    each, ``radius`` (B,)) as each of its rods sees it: the segment's ends (R, D) and radius (R,), written into
+    ``starts``, ``ends`` and ``radii``. In 3-D, world coordinates. A planar finger sees the section of the sphere by
+    its vertical plane: a circle centred (c·d, c_z) in the plane's (s, z), of radius √(R² − (c·n)²)."""
+    n_fingers = finger_directions.shape[0]
+    dim = starts.shape[1]
+    for b in range(c.shape[0]):
+        for f in range(n_fingers):
+            r = b * n_fingers + f
+            if dim == 3:
+                for k in range(3):
+                    starts[r, k] = c[b, k]
+                    ends[r, k] = c[b, k]
+                    for j in range(3):
+                        starts[r, k] += orientation[b, k, j] * segment_start[b, j]
+                        ends[r, k] += orientation[b, k, j] * segment_end[b, j]
+                radii[r] = radius[b]
+            else:
+                along = 0.0
+                across = 0.0
+                for k in range(3):
+                    along += c[b, k] * finger_directions[f, k]
+                    across += c[b, k] * plane_normals[f, k]
+                starts[r, 0] = ends[r, 0] = along
+                starts[r, 1] = ends[r, 1] = c[b, 2]
+                radii[r] = math.sqrt(max(radius[b] ** 2 - across**2, 0.0))
+
+
+@njit(cache=True, error_model="numpy")
+def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, band_width, mass_term,
+                    tolerance_inverse, clamp_free, held, offsets, projection, body, palm, c, theta, body_old,
+                    body_water, any_motion, finger_directions, plane_normals, body_tolerance, max_iterations,
+                    finger_length, first_free_node, penetration_tolerance, force_tolerance, max_corrector_iterations,
+                    converged, iterations, ratio, residual, corrector, changed):
+    """The predictor–corrector with a free body (see ``Simulator._solve_with_body``), every gripper at once.
+
+    Solves rods and body together (:func:`coupled_newton`), then finds the holds whose normal reaction turned
+    adhesive (pulling by more than ``force_tolerance`` [N]) and the free nodes that penetrate the body by more than
+    ``penetration_tolerance`` [m]. Within ``max_corrector_iterations`` the adhesive holds are released and the new
+    penetrations held, where their path entered the surface, at an offset fixed in the body's frame; after that,
+    holds are only added, while nodes are inside. Only the grippers whose contacts changed are solved again, from
+    their last solution. ``q``, ``offsets`` (R, N, 3), ``c`` and ``theta`` (B, 3) hold the start and receive the
+    solution; ``held`` (R, N) the holds at the start. Writes per rod ``converged``, ``iterations``, ``ratio``,
+    ``residual`` (R, n) (as :func:`coupled_newton`), the corrector's solves ``corrector`` and whether the last
+    test still changed the rod's contacts, ``changed`` (R,). ``any_motion`` (B, 6, 6) is the 3-D body's basis
+    (empty for planar fingers, whose basis depends on the holds). Returns the final holds (R, N) and the body's
+    orientation at the solution (B, 3, 3)."""
+    n_rods, n_nodes, stride = q.shape
+    dim = water.shape[1]
+    n_grippers = c.shape[0]
+    n_fingers = n_rods // n_grippers
+    c_old, orientation_old = body_old[0], body_old[2]
+    segment_start, segment_end, radius = body[7], body[8], body[9]
+    grippers = np.ones(n_grippers, dtype=np.bool_)
+    gripper_converged = np.zeros(n_grippers, dtype=np.bool_)
+    gripper_iterations = np.zeros(n_grippers, dtype=np.int64)
+    gripper_ratio = np.full(n_grippers, np.inf)
+    free = np.empty_like(clamp_free)
+    orientation = np.empty((n_grippers, 3, 3))
+    rotation = np.empty((3, 3))
+    starts, ends, radii = np.empty((n_rods, dim)), np.empty((n_rods, dim)), np.empty(n_rods)
+    shift = np.empty((n_rods, dim))
+    reaction = np.empty((n_rods, n_nodes, dim))
+    hold_at = np.empty((n_rods, n_nodes, dim))
+    new_hold = np.empty((n_rods, n_nodes), dtype=np.bool_)
+    adhesive = np.empty((n_rods, n_nodes), dtype=np.bool_)
+    again = np.empty(n_rods, dtype=np.bool_)
+    positions, old_positions = q[:, :, :dim], q_old[:, :, :dim]
+    corrector[:] = 0
+    for k in range(max_corrector_iterations + n_nodes + 1):  # holds-only solves end by N
+        free[:, :] = clamp_free
+        for r in range(n_rods):
+            for i in range(n_nodes):
+                if held[r, i]:
+                    for d in range(dim):
+                        free[r, stride * i + d] = False
+        basis = any_motion if dim == 3 else planar_body_basis(held, plane_normals)
+        coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, band_width, mass_term,
+                       tolerance_inverse, free, held, offsets, projection, body, palm, c, theta, body_old, body_water,
+                       basis, body_tolerance, grippers, max_iterations, gripper_converged, gripper_iterations,
+                       gripper_ratio, residual)
+        for b in range(n_grippers):
+            _rotation_exp(theta[b], rotation)
+            for i in range(3):
+                for j in range(3):
+                    orientation[b, i, j] = rotation[i, 0] * orientation_old[b, 0, j] \
+                        + rotation[i, 1] * orientation_old[b, 1, j] + rotation[i, 2] * orientation_old[b, 2, j]
+        body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finger_directions, plane_normals,
+                           starts, ends, radii)
+        for r in range(n_rods):
+            b = r // n_fingers
+            for d in range(dim):
+                shift[r, d] = projection[r, d, 0] * (c[b, 0] - c_old[b, 0]) \
+                    + projection[r, d, 1] * (c[b, 1] - c_old[b, 1]) + projection[r, d, 2] * (c[b, 2] - c_old[b, 2])
+                for i in range(n_nodes):
+                    reaction[r, i, d] = residual[r, stride * i + d] if held[r, i] else 0.0
+        searched = within_reach(starts, ends, radii, finger_length)
+        normal = normal_reactions(positions, reaction, starts, ends)
+        hold_at[:, :, :] = 0.0
+        new_hold[:, :] = False
+        found = find_penetrations(positions, old_positions, shift, starts, ends, radii, held, searched,
+                                  first_free_node, penetration_tolerance, new_hold, hold_at)
+        # a reaction is known to Newton's tolerance: one pulling by less is zero, and releasing it would only cycle
+        any_change = False
+        any_new = False
+        for r in range(n_rods):
+            changed[r] = found[r] > 0
+            again[r] = False
+            for i in range(n_nodes):
+                adhesive[r, i] = held[r, i] and normal[r, i] < -force_tolerance
+                changed[r] |= adhesive[r, i]
+                again[r] |= new_hold[r, i]
+            any_change |= changed[r]
+            any_new |= again[r]
+        if not any_change:
+            break
+        within_budget = k < max_corrector_iterations
+        if not within_budget and not any_new:
+            break
+        # the offset of a new hold, in the body's frame at the end of this solve
+        for r in range(n_rods):
+            b = r // n_fingers
+            for i in range(n_nodes):
+                if not new_hold[r, i]:
+                    continue
+                for m in range(3):
+                    value = 0.0
+                    for j in range(3):
+                        world = 0.0
+                        for d in range(dim):
+                            world += projection[r, d, j] * hold_at[r, i, d]
+                        value += orientation[b, j, m] * (world - c[b, j])
+                    offsets[r, i, m] = value
+        for r in range(n_rods):
+            if within_budget:
+                again[r] = changed[r]
+            for i in range(n_nodes):
+                held[r, i] = (held[r, i] and not (within_budget and adhesive[r, i])) or new_hold[r, i]
+            if again[r]:
+                corrector[r] += 1
+        for b in range(n_grippers):
+            grippers[b] = again[b * n_fingers: (b + 1) * n_fingers].any()
+    for r in range(n_rods):
+        b = r // n_fingers
+        converged[r] = gripper_converged[b]
+        iterations[r] = gripper_iterations[b]
+        ratio[r] = gripper_ratio[b]
+    return held, orientation

@@ -30,13 +30,12 @@ from .contact import (
     normal_reactions,
     object_in_rod_frames,
     reachable,
-    within_reach,
 )
 from .discretization import Discretization
 from .forces import ForceTerms
 from .hydrodynamics import Current, CurrentBatch, MorisonDrag, rod_water_velocity
 from .integrators import INTEGRATORS, evolve, record
-from .rigid_body import BodyModel, coupled_newton, planar_body_basis, rotation_exp
+from .rigid_body import BodyModel, body_in_rod_frames, solve_with_body
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
 
@@ -166,7 +165,7 @@ class Simulator:
             force_tolerance = self._force_tolerance
             length = scene.gripper.finger.length
             self._body_tolerance = np.repeat([force_tolerance, force_tolerance * length], 3)  # [N], [N·m]
-            self._any_motion = np.tile(np.eye(6), (B, 1, 1))
+            self._any_motion = np.tile(np.eye(6), (B, 1, 1)) if scene.model == "3d" else np.empty((0, 6, 6))
         elif obj is not None:
             R, D = self.n_rods, self.disc.dim
             self._object = (np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), np.zeros(R, dtype=bool))
@@ -496,106 +495,46 @@ class Simulator:
     def _body_in_rod_frames(self, centers: np.ndarray,
                             orientations: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A free body at ``centers`` (B, 3) turned by ``orientations`` (B, 3, 3) as each rod sees it: its segment's
-        ends (R, D) and (R, D), and its radius (R,)."""
-        radius = np.repeat(self._body.radius, self.n_fingers)
-        if self.disc.dim == 3:
-            ends = [np.repeat(centers + np.einsum("bij,bj->bi", orientations, point), self.n_fingers, axis=0)
-                    for point in self._body.segment]
-            return ends[0], ends[1], radius
-        distance = (centers @ self._plane_normals.T).ravel()
-        rod_centers = np.empty((self.n_rods, 2))
-        rod_centers[:, 0] = (centers @ self.disc.finger_directions.T).ravel()
-        rod_centers[:, 1] = np.repeat(centers[:, 2], self.n_fingers)
-        return rod_centers, rod_centers, np.sqrt(np.maximum(radius**2 - distance**2, 0.0))
+        ends (R, D) and (R, D), and its radius (R,) (:func:`~.rigid_body.body_in_rod_frames`)."""
+        R, D = self.n_rods, self.disc.dim
+        starts, ends, radii = np.empty((R, D)), np.empty((R, D)), np.empty(R)
+        body = self._body
+        body_in_rod_frames(np.ascontiguousarray(centers), np.ascontiguousarray(orientations), *body.segment,
+                           body.radius, self.disc.finger_directions, self._plane_normals, starts, ends, radii)
+        return starts, ends, radii
 
     def _solve_with_body(self, state, q, q_old, q_pred, frames_old, kbar, dt):
-        """Predictor–corrector contact with a free sphere: each solve moves rods and body together
-        (:meth:`_newton_with_body`); new penetrations are held where they entered the body's surface, with their
-        offset in the body's frame, and adhesive holds are released, until nothing changes. Each re-solve starts from
-        the last solution, so Newton starts a few penetration depths from the new one; restarting from the predictor
-        would start a hold far from a body that the impact has slowed, a jump the 3-D coupled solve did not always
-        survive. ``q`` (R, N, S) holds Newton's start and receives the solution."""
+        """Predictor–corrector contact with a free sphere (:func:`~.rigid_body.solve_with_body`, one compiled
+        loop): each solve moves rods and body together; new penetrations are held where they entered the body's
+        surface, with their offset in the body's frame, and adhesive holds are released, until nothing changes. Each
+        re-solve starts from the last solution, so Newton starts a few penetration depths from the new one;
+        restarting from the predictor would start a hold far from a body that the impact has slowed, a jump the 3-D
+        coupled solve did not always survive. Only the grippers whose contacts changed are solved again. ``q``
+        (R, N, S) holds Newton's start and receives the solution."""
         disc = self.disc
-        R, N, D = self.n_rods, disc.n_nodes, disc.dim
-        B, F = self.batch_size, self.n_fingers
+        R, N = self.n_rods, disc.n_nodes
         held = state.held.reshape(R, N).copy()
         offsets = state.hold_offset.reshape(R, N, 3).copy()
-        body_old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
+        body_old = tuple(np.ascontiguousarray(x) for x in (state.body_position, state.body_velocity,
+                                                           state.body_orientation, state.body_angular_velocity))
         c, theta = body_old[0] + dt * body_old[1], dt * body_old[3]  # the body's predictor
-        corrector = np.zeros(R, dtype=np.int64)
-        converged = np.zeros(R, dtype=bool)
-        iterations = np.zeros(R, dtype=np.int64)
-        ratio = np.full(R, np.inf)
+        converged = np.empty(R, dtype=bool)
+        iterations = np.empty(R, dtype=np.int64)
+        ratio = np.empty(R)
         residual = np.zeros((R, disc.n_dofs))
-        grippers = np.ones(B, dtype=bool)  # solved again: all at first, then those whose contacts changed
-        for k in range(self.scene.contact.max_corrector_iterations + N + 1):  # holds-only solves end by N
-            rods = np.repeat(grippers, F)
-            if grippers.all():
-                solved = self._newton_with_body(q, q_old, q_pred, frames_old, kbar, state.time, dt, held, offsets,
-                                                body_old, c, theta, grippers)
-            else:  # only the grippers whose contacts changed, as a batch of their own: cost ∝ their number
-                index = np.nonzero(grippers)[0]
-                sub = self._subsimulator(index)
-                q_sub, c_sub, theta_sub = q[rods], c[index], theta[index]
-                frames_sub = None if frames_old is None else tuple(f[rods] for f in frames_old)
-                solved = sub._newton_with_body(q_sub, q_old[rods], q_pred[rods], frames_sub, kbar[rods], state.time,
-                                               dt, held[rods], offsets[rods], tuple(b[index] for b in body_old),
-                                               c_sub, theta_sub, np.ones(len(index), dtype=bool))
-                q[rods], c[index], theta[index] = q_sub, c_sub, theta_sub
-            for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
-                total[rods] = part  # every rod when all grippers were solved, else the sub-batch's
-            position, orientation = c, rotation_exp(theta) @ body_old[2]
-            starts, ends, radii = self._body_in_rod_frames(position, orientation)
-            hold_at = np.zeros((R, N, D))
-            shift = np.einsum("rdj,rj->rd", self._projection, np.repeat(position - body_old[0], F, axis=0))
-            searched = within_reach(starts, ends, radii, self.scene.gripper.finger.length)
-            adhesive, new_hold, changed = self._contact_changes(q, q_old, residual, held, starts, ends, radii,
-                                                                searched, shift, hold_at)
-            update = self._next_holds(k, held, adhesive, new_hold, changed)
-            if update is None:
-                break
-            # the offset of a new hold, in the body's frame at the end of this solve
-            world = np.einsum("rdj,rnd->rnj", self._projection, hold_at)  # rod coordinates back to world
-            rod_orientation = np.repeat(orientation, F, axis=0)
-            rod_position = np.repeat(position, F, axis=0)
-            new_offsets = np.einsum("rji,rnj->rni", rod_orientation, world - rod_position[:, None, :])
-            offsets[new_hold] = new_offsets[new_hold]
-            held, again = update
-            corrector[again] += 1
-            grippers = again.reshape(B, F).any(axis=1)
-        return (q, held, changed, corrector, converged, iterations, ratio, residual,
-                (offsets, position, (position - body_old[0]) / dt, orientation, theta / dt))
-
-    def _body_basis(self, held: np.ndarray) -> np.ndarray:
-        """Basis (B, 6, 6) of the motions a free body may make, padded with zero columns. In 3-D, any. With planar
-        fingers, any translation, and only rotations about the normal of every touching finger's plane (a rotation
-        about another axis would carry held points out of a plane the finger cannot leave)."""
-        if self.disc.dim == 3:
-            return self._any_motion
-        return planar_body_basis(held, self._plane_normals)
-
-    def _newton_with_body(self, q, q_old, q_pred, frames_old, kbar, time, dt, held, offsets, body_old, c, theta,
-                          grippers):
-        """Newton's method on the rods and a free body together (:func:`~.rigid_body.coupled_newton`), for the
-        grippers where ``grippers`` (B,) is True. ``q`` (R, N, S), the body's centre ``c`` (B, 3) and its rotation
-        over the step ``theta`` (B, 3) hold the start and receive the solution. Returns per-rod converged,
-        iterations and residual ratio (R,), and the residual M·(q − q_pred)/Δt² − f (R, n) (the reactions, on held
-        DOFs)."""
-        disc = self.disc
-        B, F = self.batch_size, self.n_fingers
+        corrector = np.empty(R, dtype=np.int64)
+        changed = np.empty(R, dtype=bool)
         mass_term, tolerance_inverse = self._per_step(dt)
-        converged = np.zeros(B, dtype=bool)
-        iterations = np.zeros(B, dtype=np.int64)
-        ratio = np.full(B, np.inf)
-        residual = np.zeros((self.n_rods, disc.n_dofs))
-        water, rod_water = self._water(time)
-        coupled_newton(q, q_old, q_pred, kbar, rod_water, dt, self._elastic,
-                       frames_old or self._no_frames, self._force_terms, disc.band_width, mass_term, tolerance_inverse,
-                       self._free_mask(held), held, offsets, self._projection, *self._body.arrays(), c, theta,
-                       tuple(np.ascontiguousarray(x) for x in body_old), water, self._body_basis(held),
-                       self._body_tolerance, grippers, self.scene.newton.max_iterations, converged, iterations, ratio,
-                       residual)
-        return np.repeat(converged, F), np.repeat(iterations, F), np.repeat(ratio, F), residual
+        water, rod_water = self._water(state.time)
+        held, orientation = solve_with_body(
+            q, q_old, q_pred, kbar, rod_water, dt, self._elastic, frames_old or self._no_frames, self._force_terms,
+            disc.band_width, mass_term, tolerance_inverse, self._clamp_free, held, offsets, self._projection,
+            *self._body.arrays(), c, theta, body_old, water, self._any_motion, disc.finger_directions,
+            self._plane_normals, self._body_tolerance, self.scene.newton.max_iterations,
+            self.scene.gripper.finger.length, self._first_free_node, PENETRATION_TOLERANCE, self._force_tolerance,
+            self.scene.contact.max_corrector_iterations, converged, iterations, ratio, residual, corrector, changed)
+        return (q, held, changed, corrector, converged, iterations, ratio, residual,
+                (offsets, c, (c - body_old[0]) / dt, orientation, theta / dt))
 
     def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray,
                  midpoint: bool = False) -> StepResult:
