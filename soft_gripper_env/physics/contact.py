@@ -302,3 +302,53 @@ def find_penetrations(positions, old_positions, shifts, starts, ends, radii, hel
             for k in range(dim):
                 hold_at[r, i, k] = nearest[k] + (point[k] - nearest[k]) * radius / distance
     return found
+
+
+@njit(cache=True, error_model="numpy")
+def contact_changes(positions, old_positions, residual, held, starts, ends, radii, searched, shifts, first_free_node,
+                    force_tolerance, adhesive, new_hold, hold_at, changed):
+    """The corrector's test after a solve, for rods whose nodes are at ``positions`` (R, N, D) and whose residual
+    (R, n) holds the reactions on held DOFs: marks in ``adhesive`` (R, N) the holds whose normal reaction pulls by
+    more than ``force_tolerance`` [N] (a reaction is known to Newton's tolerance: one pulling by less is zero, and
+    releasing it would only make the corrector cycle), in ``new_hold`` (R, N) the free nodes that penetrate the
+    object, with their hold points in ``hold_at`` (:func:`find_penetrations`), and in ``changed`` (R,) the rods with
+    either."""
+    n_rods, n_nodes, dim = positions.shape
+    stride = residual.shape[1] // n_nodes
+    reaction = np.zeros((n_rods, n_nodes, dim))
+    for r in range(n_rods):
+        for i in range(n_nodes):
+            if held[r, i]:
+                for d in range(dim):
+                    reaction[r, i, d] = residual[r, stride * i + d]
+    normal = normal_reactions(positions, reaction, starts, ends)
+    new_hold[:, :] = False
+    found = find_penetrations(positions, old_positions, shifts, starts, ends, radii, held, searched, first_free_node,
+                              PENETRATION_TOLERANCE, new_hold, hold_at)
+    for r in range(n_rods):
+        changed[r] = found[r] > 0
+        for i in range(n_nodes):
+            adhesive[r, i] = held[r, i] and normal[r, i] < -force_tolerance
+            changed[r] |= adhesive[r, i]
+
+
+@njit(cache=True, error_model="numpy")
+def corrector_continues(within_budget, new_hold, changed, again):
+    """The corrector's decision after a test: whether to solve again, and which rods (``again`` (R,)). Within the
+    budget, every rod that changed. Once the budget is spent, only while nodes are inside the object, and only
+    those rods: then holds only grow, so the solves end with no node inside, since a hold that pulls for one step is
+    a smaller error than a node left inside the object, from which the next step may not recover (the step reports
+    resolved = False either way)."""
+    if not changed.any():
+        return False
+    for r in range(changed.shape[0]):
+        again[r] = changed[r] if within_budget else new_hold[r].any()
+    return again.any()
+
+
+@njit(cache=True, error_model="numpy")
+def update_holds(within_budget, held, adhesive, new_hold):
+    """The holds of the next solve, in place: new penetrations held, and within the budget adhesive holds released."""
+    for r in range(held.shape[0]):
+        for i in range(held.shape[1]):
+            held[r, i] = (held[r, i] and not (within_budget and adhesive[r, i])) or new_hold[r, i]

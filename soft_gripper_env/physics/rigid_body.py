@@ -39,7 +39,7 @@ import numpy as np
 from numba import njit
 
 from .assembly import assemble_rod
-from .contact import find_penetrations, normal_reactions, within_reach
+from .contact import contact_changes, corrector_continues, update_holds, within_reach
 from .forces import Buoyancy, Gravity
 from .hydrodynamics import AddedMass, MorisonDrag
 from .linalg import factor_banded_symmetric, solve_factored
@@ -568,21 +568,21 @@ def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finge
 def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, band_width, mass_term,
                     tolerance_inverse, clamp_free, held, offsets, projection, body, palm, c, theta, body_old,
                     body_water, any_motion, finger_directions, plane_normals, body_tolerance, max_iterations,
-                    finger_length, first_free_node, penetration_tolerance, force_tolerance, max_corrector_iterations,
+                    finger_length, first_free_node, force_tolerance, max_corrector_iterations,
                     converged, iterations, ratio, residual, corrector, changed):
     """The predictor–corrector with a free body (see ``Simulator._solve_with_body``), every gripper at once.
 
-    Solves rods and body together (:func:`coupled_newton`), then finds the holds whose normal reaction turned
-    adhesive (pulling by more than ``force_tolerance`` [N]) and the free nodes that penetrate the body by more than
-    ``penetration_tolerance`` [m]. Within ``max_corrector_iterations`` the adhesive holds are released and the new
-    penetrations held, where their path entered the surface, at an offset fixed in the body's frame; after that,
-    holds are only added, while nodes are inside. Only the grippers whose contacts changed are solved again, from
-    their last solution. ``q``, ``offsets`` (R, N, 3), ``c`` and ``theta`` (B, 3) hold the start and receive the
-    solution; ``held`` (R, N) the holds at the start. Writes per rod ``converged``, ``iterations``, ``ratio``,
-    ``residual`` (R, n) (as :func:`coupled_newton`), the corrector's solves ``corrector`` and whether the last
-    test still changed the rod's contacts, ``changed`` (R,). ``any_motion`` (B, 6, 6) is the 3-D body's basis
-    (empty for planar fingers, whose basis depends on the holds). Returns the final holds (R, N) and the body's
-    orientation at the solution (B, 3, 3)."""
+    Solves rods and body together (:func:`coupled_newton`), then finds the holds whose normal reaction turned adhesive
+    (pulling by more than ``force_tolerance`` [N]) and the free nodes that penetrate the body
+    (:func:`~.contact.contact_changes`). Within ``max_corrector_iterations`` the adhesive holds are released and the
+    new penetrations held, where their path entered the surface, at an offset fixed in the body's frame; after that,
+    holds are only added, while nodes are inside (:func:`~.contact.corrector_continues`). Only the grippers whose
+    contacts changed are solved again, from their last solution. ``q``, ``offsets`` (R, N, 3), ``c`` and ``theta``
+    (B, 3) hold the start and receive the solution; ``held`` (R, N) the holds at the start. Writes per rod
+    ``converged``, ``iterations``, ``ratio``, ``residual`` (R, n) (as :func:`coupled_newton`), the corrector's
+    solves ``corrector`` and whether the last test still changed the rod's contacts, ``changed`` (R,).
+    ``any_motion`` (B, 6, 6) is the 3-D body's basis (empty for planar fingers, whose basis depends on the holds).
+    Returns the final holds (R, N) and the body's orientation at the solution (B, 3, 3)."""
     n_rods, n_nodes, stride = q.shape
     dim = water.shape[1]
     n_grippers = c.shape[0]
@@ -598,7 +598,6 @@ def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, fra
     rotation = np.empty((3, 3))
     starts, ends, radii = np.empty((n_rods, dim)), np.empty((n_rods, dim)), np.empty(n_rods)
     shift = np.empty((n_rods, dim))
-    reaction = np.empty((n_rods, n_nodes, dim))
     hold_at = np.empty((n_rods, n_nodes, dim))
     new_hold = np.empty((n_rods, n_nodes), dtype=np.bool_)
     adhesive = np.empty((n_rods, n_nodes), dtype=np.bool_)
@@ -630,30 +629,11 @@ def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, fra
             for d in range(dim):
                 shift[r, d] = projection[r, d, 0] * (c[b, 0] - c_old[b, 0]) \
                     + projection[r, d, 1] * (c[b, 1] - c_old[b, 1]) + projection[r, d, 2] * (c[b, 2] - c_old[b, 2])
-                for i in range(n_nodes):
-                    reaction[r, i, d] = residual[r, stride * i + d] if held[r, i] else 0.0
         searched = within_reach(starts, ends, radii, finger_length)
-        normal = normal_reactions(positions, reaction, starts, ends)
-        hold_at[:, :, :] = 0.0
-        new_hold[:, :] = False
-        found = find_penetrations(positions, old_positions, shift, starts, ends, radii, held, searched,
-                                  first_free_node, penetration_tolerance, new_hold, hold_at)
-        # a reaction is known to Newton's tolerance: one pulling by less is zero, and releasing it would only cycle
-        any_change = False
-        any_new = False
-        for r in range(n_rods):
-            changed[r] = found[r] > 0
-            again[r] = False
-            for i in range(n_nodes):
-                adhesive[r, i] = held[r, i] and normal[r, i] < -force_tolerance
-                changed[r] |= adhesive[r, i]
-                again[r] |= new_hold[r, i]
-            any_change |= changed[r]
-            any_new |= again[r]
-        if not any_change:
-            break
+        contact_changes(positions, old_positions, residual, held, starts, ends, radii, searched, shift,
+                        first_free_node, force_tolerance, adhesive, new_hold, hold_at, changed)
         within_budget = k < max_corrector_iterations
-        if not within_budget and not any_new:
+        if not corrector_continues(within_budget, new_hold, changed, again):
             break
         # the offset of a new hold, in the body's frame at the end of this solve
         for r in range(n_rods):
@@ -669,11 +649,8 @@ def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, fra
                             world += projection[r, d, j] * hold_at[r, i, d]
                         value += orientation[b, j, m] * (world - c[b, j])
                     offsets[r, i, m] = value
+        update_holds(within_budget, held, adhesive, new_hold)
         for r in range(n_rods):
-            if within_budget:
-                again[r] = changed[r]
-            for i in range(n_nodes):
-                held[r, i] = (held[r, i] and not (within_budget and adhesive[r, i])) or new_hold[r, i]
             if again[r]:
                 corrector[r] += 1
         for b in range(n_grippers):

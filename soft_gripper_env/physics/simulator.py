@@ -24,12 +24,13 @@ import numpy as np
 from .assembly import advance_rods, assemble, finish, midpoint_end, newton_solve, per_gripper, predict
 from .config import Scene
 from .contact import (
-    PENETRATION_TOLERANCE,
     ContactReport,
-    find_penetrations,
+    contact_changes,
+    corrector_continues,
     normal_reactions,
     object_in_rod_frames,
     reachable,
+    update_holds,
 )
 from .discretization import Discretization
 from .forces import ForceTerms
@@ -435,34 +436,6 @@ class Simulator:
                      self.scene.newton.max_iterations, converged, iterations, ratio, residual)
         return converged, iterations, ratio, residual
 
-    def _contact_changes(self, q, q_old, residual, held, starts, ends, radii, searched, shift, hold_at):
-        """The corrector's test after a solve: the holds whose normal reaction turned adhesive, the free nodes that
-        penetrate the object (their hold points written into ``hold_at``), and which rods changed (R,)."""
-        R, N, S, D = self.n_rods, self.disc.n_nodes, self.disc.stride, self.disc.dim
-        reaction = residual.reshape(R, N, S)[..., :D] * held[..., None]
-        normal_reaction = normal_reactions(q[..., :D], reaction, starts, ends)
-        # a reaction is known to Newton's tolerance: one pulling by less is zero, and releasing it would only cycle
-        adhesive = held & (normal_reaction < -self._force_tolerance)
-        new_hold = np.zeros((R, N), dtype=bool)
-        found = find_penetrations(q[..., :D], q_old[..., :D], shift, starts, ends, radii, held, searched,
-                                  self._first_free_node, PENETRATION_TOLERANCE, new_hold, hold_at)
-        return adhesive, new_hold, adhesive.any(axis=1) | (found > 0)
-
-    def _next_holds(self, k, held, adhesive, new_hold, changed):
-        """The corrector's decision after solve ``k``: the holds of the next solve (R, N) and the rods to solve
-        again (R,), or None to stop. Within the budget, new penetrations are held and adhesive holds released. Once
-        the budget is spent, solves continue only while nodes are inside the object, and hold them without
-        releasing anything, so they end (holds only grow) with no node inside: a hold that pulls for one step is a
-        smaller error than a node left inside the object, from which the next step may not recover (the step
-        reports resolved = False either way)."""
-        if not changed.any():
-            return None
-        if k < self.scene.contact.max_corrector_iterations:
-            return (held & ~adhesive) | new_hold, changed
-        if not new_hold.any():
-            return None
-        return held | new_hold, new_hold.any(axis=1)
-
     def _solve_with_contact(self, state, q, q_old, q_pred, frames_old, kbar, dt):
         """The predictor–corrector (see :mod:`.contact`): solve, release adhesive holds, hold new penetrations, and
         solve the rods that changed again (each from its last solution), until none does or the corrector's budget is
@@ -476,19 +449,21 @@ class Simulator:
         ratio = np.full(R, np.inf)
         residual = np.zeros((R, disc.n_dofs))
         corrector = np.zeros(R, dtype=np.int64)
-        rods = self._all_rods
+        rods = self._all_rods.copy()
         starts, ends, radii, searched = self._object
+        adhesive, new_hold = np.empty((R, N), dtype=bool), np.empty((R, N), dtype=bool)
+        changed = np.empty(R, dtype=bool)
         for k in range(self.scene.contact.max_corrector_iterations + N + 1):  # holds-only solves end by N
             q[..., :D][held & rods[:, None]] = hold_at[held & rods[:, None]]  # from the last solution, warm
             solved = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt, self._free_mask(held), rods)
             for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
                 total[rods] = part[rods]
-            adhesive, new_hold, changed = self._contact_changes(q, q_old, residual, held, starts, ends, radii,
-                                                                searched, self._no_shift, hold_at)
-            update = self._next_holds(k, held, adhesive, new_hold, changed)
-            if update is None:
+            contact_changes(q[..., :D], q_old[..., :D], residual, held, starts, ends, radii, searched, self._no_shift,
+                            self._first_free_node, self._force_tolerance, adhesive, new_hold, hold_at, changed)
+            within_budget = k < self.scene.contact.max_corrector_iterations
+            if not corrector_continues(within_budget, new_hold, changed, rods):
                 break
-            held, rods = update
+            update_holds(within_budget, held, adhesive, new_hold)
             corrector[rods] += 1
         return q, held, changed, corrector, converged, iterations, ratio, residual
 
@@ -531,7 +506,7 @@ class Simulator:
             disc.band_width, mass_term, tolerance_inverse, self._clamp_free, held, offsets, self._projection,
             *self._body.arrays(), c, theta, body_old, water, self._any_motion, disc.finger_directions,
             self._plane_normals, self._body_tolerance, self.scene.newton.max_iterations,
-            self.scene.gripper.finger.length, self._first_free_node, PENETRATION_TOLERANCE, self._force_tolerance,
+            self.scene.gripper.finger.length, self._first_free_node, self._force_tolerance,
             self.scene.contact.max_corrector_iterations, converged, iterations, ratio, residual, corrector, changed)
         return (q, held, changed, corrector, converged, iterations, ratio, residual,
                 (offsets, c, (c - body_old[0]) / dt, orientation, theta / dt))
