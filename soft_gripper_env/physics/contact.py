@@ -352,3 +352,15 @@ def update_holds(within_budget, held, adhesive, new_hold):
     for r in range(held.shape[0]):
         for i in range(held.shape[1]):
             held[r, i] = (held[r, i] and not (within_budget and adhesive[r, i])) or new_hold[r, i]
+
+
+@njit(cache=True, error_model="numpy")
+def release_held(free, held, dim):
+    """Marks the position DOFs of every held node (R, N) as not free in ``free`` (R, n), in place: a held node
+    moves with its object, not on its own."""
+    stride = free.shape[1] // held.shape[1]
+    for r in range(held.shape[0]):
+        for i in range(held.shape[1]):
+            if held[r, i]:
+                for d in range(dim):
+                    free[r, stride * i + d] = False

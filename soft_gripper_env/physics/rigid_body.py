@@ -39,7 +39,7 @@ import numpy as np
 from numba import njit
 
 from .assembly import assemble_rod
-from .contact import contact_changes, corrector_continues, update_holds, within_reach
+from .contact import contact_changes, corrector_continues, release_held, update_holds, within_reach
 from .forces import Buoyancy, Gravity
 from .hydrodynamics import AddedMass, MorisonDrag
 from .linalg import factor_banded_symmetric, solve_factored
@@ -258,8 +258,8 @@ def _rotation_exp(theta, out):
 
 
 @njit(cache=True, error_model="numpy")
-def eliminate_rods(band, residual, coupling, free, active, coupled, x0, x_coupling, body_block, body_rhs):
-    """Eliminates each active rod's free DOFs from the coupled Newton system.
+def eliminate_rods(band, residual, coupling, free, coupled, x0, x_coupling, body_block, body_rhs):
+    """Eliminates each rod's free DOFs from the coupled Newton system.
 
     ``band`` (R, n, kd+1): the rod's Newton matrix A (overwritten by its factors); ``residual`` (R, n): G;
     ``coupling`` (R, n, 6): S, the motion of each held DOF per unit body motion (zero on other DOFs); ``free``
@@ -274,8 +274,6 @@ def eliminate_rods(band, residual, coupling, free, active, coupled, x0, x_coupli
     column = np.empty(n)
     failures = 0
     for r in range(n_rods):
-        if not active[r]:
-            continue
         a = band[r]
         s = coupling[r]
         if coupled[r]:  # Sᵀ·A·S needs A before it is factored
@@ -354,7 +352,6 @@ def coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, fram
     block = np.empty((n_fingers, 6, 6))
     rhs = np.empty((n_fingers, 6))
     touching = np.empty(n_fingers, dtype=np.bool_)
-    every = np.ones(n_fingers, dtype=np.bool_)
     orientation = np.empty((3, 3))
     world = np.empty(3)
     a = np.empty(3)
@@ -454,8 +451,7 @@ def coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, fram
                     bands[f, j, band_width] += mass_term[j]
             block[:, :, :] = 0.0
             rhs[:, :] = 0.0
-            if eliminate_rods(bands, residual[rods], coupling, free[rods], every, touching, x0, x_coupling, block,
-                              rhs):
+            if eliminate_rods(bands, residual[rods], coupling, free[rods], touching, x0, x_coupling, block, rhs):
                 ratio[b] = np.inf
                 break
             for f in range(n_fingers):
@@ -582,7 +578,8 @@ def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, fra
     ``converged``, ``iterations``, ``ratio``, ``residual`` (R, n) (as :func:`coupled_newton`), the corrector's
     solves ``corrector`` and whether the last test still changed the rod's contacts, ``changed`` (R,).
     ``any_motion`` (B, 6, 6) is the 3-D body's basis (empty for planar fingers, whose basis depends on the holds).
-    Returns the final holds (R, N) and the body's orientation at the solution (B, 3, 3)."""
+    Returns the final holds (R, N), the body's orientation at the solution (B, 3, 3), and the body as each rod sees
+    it there (:func:`body_in_rod_frames`: segment starts and ends (R, D))."""
     n_rods, n_nodes, stride = q.shape
     dim = water.shape[1]
     n_grippers = c.shape[0]
@@ -606,11 +603,7 @@ def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, fra
     corrector[:] = 0
     for k in range(max_corrector_iterations + n_nodes + 1):  # holds-only solves end by N
         free[:, :] = clamp_free
-        for r in range(n_rods):
-            for i in range(n_nodes):
-                if held[r, i]:
-                    for d in range(dim):
-                        free[r, stride * i + d] = False
+        release_held(free, held, dim)
         basis = any_motion if dim == 3 else planar_body_basis(held, plane_normals)
         coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, band_width, mass_term,
                        tolerance_inverse, free, held, offsets, projection, body, palm, c, theta, body_old, body_water,
@@ -660,4 +653,4 @@ def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, fra
         converged[r] = gripper_converged[b]
         iterations[r] = gripper_iterations[b]
         ratio[r] = gripper_ratio[b]
-    return held, orientation
+    return held, orientation, starts, ends

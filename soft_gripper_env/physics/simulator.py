@@ -30,13 +30,14 @@ from .contact import (
     normal_reactions,
     object_in_rod_frames,
     reachable,
+    release_held,
     update_holds,
 )
 from .discretization import Discretization
 from .forces import ForceTerms
 from .hydrodynamics import Current, CurrentBatch, MorisonDrag, rod_water_velocity
 from .integrators import INTEGRATORS, evolve, record
-from .rigid_body import BodyModel, body_in_rod_frames, solve_with_body
+from .rigid_body import BodyModel, solve_with_body
 from .rod_3d import rod3d_elastic, rod3d_update_frames
 from .rod_planar import planar_elastic
 
@@ -277,11 +278,9 @@ class Simulator:
             return np.ascontiguousarray(kbar).reshape(-1)
         if not np.all(np.isfinite(kbar)):
             raise ValueError("natural_curvature (dimensionless) must be finite")
-        if np.abs(kbar).max() > NATURAL_CURVATURE_LIMIT:
-            raise ValueError(f"natural_curvature = {kbar.flat[np.abs(kbar).argmax()]:g} (dimensionless) is outside "
-                             f"the allowed range [−{NATURAL_CURVATURE_LIMIT:g}, {NATURAL_CURVATURE_LIMIT:g}]: "
-                             f"κ = 2·tan(φ/2) is singular at a turning angle φ = 180°")
-        return np.ascontiguousarray(kbar).reshape(-1)
+        raise ValueError(f"natural_curvature = {kbar.flat[np.abs(kbar).argmax()]:g} (dimensionless) is outside "
+                         f"the allowed range [−{NATURAL_CURVATURE_LIMIT:g}, {NATURAL_CURVATURE_LIMIT:g}]: "
+                         f"κ = 2·tan(φ/2) is singular at a turning angle φ = 180°")
 
     def step(self, state: RodState, natural_curvature) -> StepResult:
         """Advance ``state`` by one time step Δt with natural curvature κ̄ (dimensionless) per gripper and finger.
@@ -404,7 +403,7 @@ class Simulator:
         if not held.any():
             return self._clamp_free  # never written to
         free = self._clamp_free.copy()
-        free.reshape(held.shape[0], disc.n_nodes, disc.stride)[..., : disc.dim][held] = False
+        release_held(free, held, disc.dim)
         return free
 
     def _per_step(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -465,18 +464,7 @@ class Simulator:
                 break
             update_holds(within_budget, held, adhesive, new_hold)
             corrector[rods] += 1
-        return q, held, changed, corrector, converged, iterations, ratio, residual
-
-    def _body_in_rod_frames(self, centers: np.ndarray,
-                            orientations: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """A free body at ``centers`` (B, 3) turned by ``orientations`` (B, 3, 3) as each rod sees it: its segment's
-        ends (R, D) and (R, D), and its radius (R,) (:func:`~.rigid_body.body_in_rod_frames`)."""
-        R, D = self.n_rods, self.disc.dim
-        starts, ends, radii = np.empty((R, D)), np.empty((R, D)), np.empty(R)
-        body = self._body
-        body_in_rod_frames(np.ascontiguousarray(centers), np.ascontiguousarray(orientations), *body.segment,
-                           body.radius, self.disc.finger_directions, self._plane_normals, starts, ends, radii)
-        return starts, ends, radii
+        return q, held, changed, corrector, converged, iterations, ratio, residual, (starts, ends)
 
     def _solve_with_body(self, state, q, q_old, q_pred, frames_old, kbar, dt):
         """Predictor–corrector contact with a free sphere (:func:`~.rigid_body.solve_with_body`, one compiled
@@ -501,14 +489,14 @@ class Simulator:
         changed = np.empty(R, dtype=bool)
         mass_term, tolerance_inverse = self._per_step(dt)
         water, rod_water = self._water(state.time)
-        held, orientation = solve_with_body(
+        held, orientation, starts, ends = solve_with_body(
             q, q_old, q_pred, kbar, rod_water, dt, self._elastic, frames_old or self._no_frames, self._force_terms,
             disc.band_width, mass_term, tolerance_inverse, self._clamp_free, held, offsets, self._projection,
             *self._body.arrays(), c, theta, body_old, water, self._any_motion, disc.finger_directions,
             self._plane_normals, self._body_tolerance, self.scene.newton.max_iterations,
             self.scene.gripper.finger.length, self._first_free_node, self._force_tolerance,
             self.scene.contact.max_corrector_iterations, converged, iterations, ratio, residual, corrector, changed)
-        return (q, held, changed, corrector, converged, iterations, ratio, residual,
+        return (q, held, changed, corrector, converged, iterations, ratio, residual, (starts, ends),
                 (offsets, c, (c - body_old[0]) / dt, orientation, theta / dt))
 
     def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray,
@@ -538,11 +526,11 @@ class Simulator:
             q_pred = np.empty((R, N, S))
             predict(q_old, v_old, acceleration_old, dt, q_pred, q)
             if self._body is not None:
-                q, held, changed, corrector, converged, iterations, ratio, residual, body = self._solve_with_body(
-                    state, q, q_old, q_pred, frames_old, kbar, dt)
+                q, held, changed, corrector, converged, iterations, ratio, residual, surface, body = \
+                    self._solve_with_body(state, q, q_old, q_pred, frames_old, kbar, dt)
             else:
-                q, held, changed, corrector, converged, iterations, ratio, residual = self._solve_with_contact(
-                    state, q, q_old, q_pred, frames_old, kbar, dt)
+                q, held, changed, corrector, converged, iterations, ratio, residual, surface = \
+                    self._solve_with_contact(state, q, q_old, q_pred, frames_old, kbar, dt)
             finish(q, q_old, v_old, dt, velocity.reshape(R, N, S), acceleration.reshape(R, N, S))
             summary = per_gripper(converged, iterations, ratio, self.n_fingers)
         if midpoint and not end_in_kernel:
@@ -569,7 +557,7 @@ class Simulator:
         if held is not None:
             reaction = np.zeros((R, N, S))
             reaction[..., :D] = residual.reshape(R, N, S)[..., :D] * held[..., None]
-            starts, ends = self._object[:2] if body is None else self._body_in_rod_frames(body[1], body[3])[:2]
+            starts, ends = surface  # the object's segment as each rod sees it at the solution
             contact = ContactReport(
                 held=held.reshape(B, F, N),
                 reaction=disc.world_positions(reaction.reshape(B, F, N, S)),
