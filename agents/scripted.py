@@ -73,5 +73,5 @@ class ReactivePolicy:
         per_action = self.task.max_curvature_rate * self.task.control_dt
         limit = self.press_rate / self.task.max_curvature_rate
         press = np.clip((self._touched_at - self.squeeze - curvature) / per_action, -limit, limit)
-        action = np.where(~touched, self._paper_action, np.where(caged, np.nan_to_num(press), 0.0))
+        action = np.where(~touched, self._paper_action, np.where(caged, press, 0.0))
         return action.astype(np.float32).reshape(observation.shape[:-1] + (3,))
