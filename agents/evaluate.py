@@ -1,4 +1,5 @@
-"""Evaluate a policy on SoftGripperUnderwater-v0 over fixed seeds: success rate, mean return, largest finger force.
+"""Evaluate a policy on SoftGripperUnderwater-v0 over fixed seeds: success rate, mean return, largest finger force,
+and how the episodes ended.
 
     python agents/evaluate.py --policy ramp|reactive|ppo [--model-dir out/ppo] [--episodes 20] [--seed 1000]
         [--json FILE]
@@ -22,16 +23,44 @@ from tqdm import tqdm  # noqa: E402
 
 import soft_gripper_env  # noqa: E402
 from agents.scripted import RampPolicy, ReactivePolicy  # noqa: E402
+from soft_gripper_env.env import observation_slices  # noqa: E402
 from soft_gripper_env.grasp_task import GraspTask  # noqa: E402
+
+ENDINGS = ("success", "lost", "solver_failure", "not_all_touching", "off_grasp_point", "moving", "held_too_briefly")
+"""How an episode can end, in the order :func:`episode_ending` tests them."""
+
+
+def episode_ending(task: GraspTask, observation: np.ndarray, terminated: bool, info: dict) -> str:
+    """Why an episode ended as it did, from its last observation and info: ``"success"``; ``"lost"`` (terminated:
+    the object beyond ``lost_distance``); ``"solver_failure"``; or, at the time limit, the first condition of a
+    hold that failed there: ``"not_all_touching"`` (a finger pressing less than ``contact_force``),
+    ``"off_grasp_point"`` (farther than ``hold_distance``), ``"moving"`` (faster than ``rest_speed``), else
+    ``"held_too_briefly"`` (held, but for less than ``success_duration``)."""
+    if info["is_success"]:
+        return "success"
+    if terminated:
+        return "lost"
+    if info["solver_failure"]:
+        return "solver_failure"
+    if np.any(np.asarray(info["finger_forces_N"]) < task.contact_force):
+        return "not_all_touching"
+    layout = observation_slices(task)
+    offset = np.asarray(observation[layout["object_position"]], dtype=float) - np.asarray(task.grasp_point)
+    if np.linalg.norm(offset) > task.hold_distance:
+        return "off_grasp_point"
+    if np.linalg.norm(np.asarray(observation[layout["object_velocity"]], dtype=float)) > task.rest_speed:
+        return "moving"
+    return "held_too_briefly"
 
 
 def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: int = 1000,
              progress: bool = True, **settings) -> dict:
     """Runs ``episodes`` episodes with seeds seed, seed + 1, ...; returns the success rate, mean and standard
-    deviation of the return, the mean episode length, the mean of each episode's largest finger force [N], and
-    the per-episode outcomes."""
+    deviation of the return, the mean episode length, the mean of each episode's largest finger force [N], how
+    many episodes ended each way (:func:`episode_ending`), and the per-episode outcomes."""
     env = gym.make(soft_gripper_env.ENV_ID, **settings)
-    successes, returns, lengths, forces = [], [], [], []
+    task = env.unwrapped.task
+    successes, returns, lengths, forces, endings = [], [], [], [], []
     for k in tqdm(range(episodes), desc="episodes", disable=not progress):
         obs, info = env.reset(seed=seed + k)
         total, largest, steps, done = 0.0, 0.0, 0, False
@@ -42,6 +71,7 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
             steps += 1
             done = terminated or truncated
         successes.append(bool(info["is_success"]))
+        endings.append(episode_ending(task, obs, terminated, info))
         returns.append(total)
         lengths.append(steps)
         forces.append(largest)
@@ -49,7 +79,8 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
     return {"episodes": episodes, "first_seed": seed, "success_rate": float(np.mean(successes)),
             "mean_return": float(np.mean(returns)), "std_return": float(np.std(returns)),
             "mean_length": float(np.mean(lengths)), "mean_largest_finger_force_N": float(np.mean(forces)),
-            "successes": successes, "returns": returns}
+            "endings": {name: endings.count(name) for name in ENDINGS},
+            "successes": successes, "returns": returns, "episode_endings": endings}
 
 
 def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
@@ -86,6 +117,7 @@ def main(argv: list[str] | None = None) -> dict:
     result = evaluate(policy, args.episodes, args.seed)
     print(f"{args.policy}: success {result['success_rate']:.2f}, return {result['mean_return']:.2f} "
           f"± {result['std_return']:.2f}, largest finger force {result['mean_largest_finger_force_N']:.2f} N")
+    print("endings: " + ", ".join(f"{name} {count}" for name, count in result["endings"].items() if count))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))

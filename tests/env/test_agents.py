@@ -54,11 +54,40 @@ def test_ppo_trains_and_is_evaluated_against_the_baselines(tmp_path):
 
 
 def test_evaluate_reports_the_ramp(tmp_path):
-    from agents.evaluate import evaluate
+    from agents.evaluate import ENDINGS, evaluate
 
     result = evaluate(RampPolicy(), episodes=1, seed=1000, progress=False, max_episode_steps=5)
     assert result["episodes"] == 1 and result["mean_length"] == 5
     assert result["mean_return"] == pytest.approx(result["returns"][0])
+    # after 0.25 s the ramp's fingers have not reached the sphere
+    assert result["episode_endings"] == ["not_all_touching"]
+    assert set(result["endings"]) == set(ENDINGS) and sum(result["endings"].values()) == 1
+
+
+def test_episode_ending_names_the_first_failed_condition():
+    from agents.evaluate import episode_ending
+    from soft_gripper_env.env import observation_slices
+    from soft_gripper_env.grasp_task import GraspTask
+
+    task = GraspTask()
+    layout = observation_slices(task)
+    observation = np.zeros(layout["object_velocity"].stop, dtype=np.float32)
+    observation[layout["object_position"]] = task.grasp_point
+    held = {"is_success": False, "solver_failure": False, "finger_forces_N": np.full(3, 2 * task.contact_force)}
+
+    def ending(terminated=False, offset=0.0, speed=0.0, **info):
+        obs = observation.copy()
+        obs[layout["object_position"].start] += offset
+        obs[layout["object_velocity"].start] = speed
+        return episode_ending(task, obs, terminated, {**held, **info})
+
+    assert ending() == "held_too_briefly"
+    assert ending(is_success=True, terminated=True) == "success"
+    assert ending(terminated=True, solver_failure=True) == "lost"
+    assert ending(solver_failure=True) == "solver_failure"
+    assert ending(finger_forces_N=np.array([1.0, 0.5 * task.contact_force, 1.0])) == "not_all_touching"
+    assert ending(offset=1.5 * task.hold_distance, speed=2 * task.rest_speed) == "off_grasp_point"
+    assert ending(offset=0.5 * task.hold_distance, speed=2 * task.rest_speed) == "moving"
 
 
 def run_script(*args, timeout=600):
