@@ -258,6 +258,17 @@ def _rotation_exp(theta, out):
 
 
 @njit(cache=True, error_model="numpy")
+def _turned(theta, orientation_old, rotation, out):
+    """The body's orientation after turning by ``theta`` (3,) [rad] over the step, exp([θ]×)·R_old, into ``out``
+    (3, 3); ``rotation`` (3, 3) is scratch."""
+    _rotation_exp(theta, rotation)
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = rotation[i, 0] * orientation_old[0, j] + rotation[i, 1] * orientation_old[1, j] \
+                + rotation[i, 2] * orientation_old[2, j]
+
+
+@njit(cache=True, error_model="numpy")
 def eliminate_rods(band, residual, coupling, free, coupled, x0, x_coupling, body_block, body_rhs):
     """Eliminates each rod's free DOFs from the coupled Newton system.
 
@@ -375,11 +386,7 @@ def coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, fram
         for f in range(n_fingers):
             touching[f] = held[b * n_fingers + f].any()
         for it in range(max_iterations + 1):
-            _rotation_exp(theta[b], rotation)
-            for i in range(3):
-                for j in range(3):
-                    orientation[i, j] = rotation[i, 0] * orientation_old[b, 0, j] \
-                        + rotation[i, 1] * orientation_old[b, 1, j] + rotation[i, 2] * orientation_old[b, 2, j]
+            _turned(theta[b], orientation_old[b], rotation, orientation)
             body_residual(b, body, palm, c, theta, body_old, orientation, dt, body_water, own, matrix)
             largest = 0.0
             for f in range(n_fingers):
@@ -499,9 +506,10 @@ def coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, fram
 
 @njit(cache=True, error_model="numpy")
 def planar_body_basis(held, plane_normals):
-    """The motions a free body held by planar fingers may make (see ``Simulator._body_basis``), (B, 6, 6): any
+    """The motions a free body held by planar fingers may make, (B, 6, 6), padded with zero columns: any
     translation; any rotation while no finger touches; while every touching finger's plane has the same normal,
-    rotation about it; else none. ``held`` (R, N) marks held nodes, ``plane_normals`` (F, 3) the fingers' planes."""
+    rotation about it; else none (a rotation about another axis would carry held points out of a plane the finger
+    cannot leave). ``held`` (R, N) marks held nodes, ``plane_normals`` (F, 3) the fingers' planes."""
     n_fingers = plane_normals.shape[0]
     n_grippers = held.shape[0] // n_fingers
     basis = np.zeros((n_grippers, 6, 6))
@@ -610,11 +618,7 @@ def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, fra
                        basis, body_tolerance, grippers, max_iterations, gripper_converged, gripper_iterations,
                        gripper_ratio, residual)
         for b in range(n_grippers):
-            _rotation_exp(theta[b], rotation)
-            for i in range(3):
-                for j in range(3):
-                    orientation[b, i, j] = rotation[i, 0] * orientation_old[b, 0, j] \
-                        + rotation[i, 1] * orientation_old[b, 1, j] + rotation[i, 2] * orientation_old[b, 2, j]
+            _turned(theta[b], orientation_old[b], rotation, orientation[b])
         body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finger_directions, plane_normals,
                            starts, ends, radii)
         for r in range(n_rods):
