@@ -538,6 +538,25 @@ def planar_body_basis(held, plane_normals):
 
 
 @njit(cache=True, error_model="numpy")
+def admissible_rotation(basis, theta):
+    """Projects each gripper's rotation over the step ``theta`` (B, 3) [rad], in place, onto the rotations its
+    ``basis`` (B, 6, 6; orthonormal columns) allows. Newton moves the body only along the basis, so a rotation it forbids would otherwise
+    keep the predictor's Δt·ω_old step after step: a body that spun before planar fingers in two planes caught it
+    would turn on at that rate for ever, carrying its holds (and the fingertips on them) around with it. Locking
+    the rotation is the same inelastic impact that stick contact is for translation."""
+    projected = np.empty(3)
+    for b in range(theta.shape[0]):
+        projected[:] = 0.0
+        for k in range(6):
+            along = 0.0
+            for i in range(3):
+                along += basis[b, 3 + i, k] * theta[b, i]
+            for i in range(3):
+                projected[i] += along * basis[b, 3 + i, k]
+        theta[b] = projected
+
+
+@njit(cache=True, error_model="numpy")
 def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finger_directions, plane_normals, starts,
                        ends, radii):
     """Each gripper's free body (centre ``c`` (B, 3), ``orientation`` (B, 3, 3), segment ends in its frame (B, 3)
@@ -612,7 +631,11 @@ def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, fra
     for k in range(max_corrector_iterations + n_nodes + 1):  # holds-only solves end by N
         free[:, :] = clamp_free
         release_held(free, held, dim)
-        basis = any_motion if dim == 3 else planar_body_basis(held, plane_normals)
+        if dim == 3:
+            basis = any_motion
+        else:
+            basis = planar_body_basis(held, plane_normals)
+            admissible_rotation(basis, theta)
         coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, band_width, mass_term,
                        tolerance_inverse, free, held, offsets, projection, body, palm, c, theta, body_old, body_water,
                        basis, body_tolerance, grippers, max_iterations, gripper_converged, gripper_iterations,

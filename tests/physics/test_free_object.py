@@ -116,6 +116,47 @@ def test_planar_and_3d_agree_with_a_free_sphere_on_the_axis():
     np.testing.assert_array_equal(planar.held, spatial.held)
 
 
+def test_planar_fingers_in_two_planes_stop_a_spinning_sphere():
+    """A neutrally buoyant sphere spinning at 0.5 rad/s about a tilted axis before the fingers close on it: once
+    fingers in different planes hold it, planar fingers lock its rotation, so it stops turning at once and comes to
+    rest. (A rotation the holds forbid must not carry on at its old rate: it would drag the held fingertips around
+    the sphere and walk it out of the hand.)"""
+    sphere = Sphere(0.05, (0.0, 0.0, -0.1), density=WATER_DENSITY)
+    sim = Simulator(paper_scene("planar", medium="water", grasped_object=sphere))
+    state = sim.initial_state()
+    state = replace(state, body_angular_velocity=np.array([[0.3, -0.3, 0.25]]))
+    spinning_when_caught = None
+    positions = []
+    for _ in range(300):
+        result = sim.step(state, max(-0.6 * state.time, -0.25))
+        assert result.converged.all()
+        state = result.state
+        fingers_holding = int(state.held[0].any(axis=1).sum())
+        if fingers_holding == 0:
+            np.testing.assert_allclose(state.body_angular_velocity[0], [0.3, -0.3, 0.25], atol=1e-12)
+        elif fingers_holding >= 2:
+            spinning_when_caught = spinning_when_caught or bool(np.any(state.body_angular_velocity[0] != 0.0))
+            assert np.all(state.body_angular_velocity[0] == 0.0)
+        positions.append(state.body_position[0].copy())
+    assert spinning_when_caught is False and state.held[0].any(axis=1).all()
+    assert np.ptp(np.array(positions[-100:]), axis=0).max() < 1e-3  # at rest in the hand
+
+
+def test_one_planar_finger_lets_a_sphere_turn_about_its_plane_normal_only():
+    from soft_gripper_env.physics.rigid_body import admissible_rotation, planar_body_basis
+
+    directions = Simulator(paper_scene("planar")).disc.finger_directions
+    normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(3)], axis=1)  # of the vertical planes
+    theta = np.array([[0.1, -0.2, 0.3]] * 3)
+    held = np.zeros((9, 20), dtype=bool)
+    held[3 + 1, 19] = True  # gripper 1: finger 1 only
+    held[6 + 0, 19] = held[6 + 2, 19] = True  # gripper 2: fingers 0 and 2
+    admissible_rotation(planar_body_basis(held, normals), theta)
+    np.testing.assert_array_equal(theta[0], [0.1, -0.2, 0.3])  # nothing holds it: any rotation
+    np.testing.assert_allclose(theta[1], (normals[1] @ [0.1, -0.2, 0.3]) * normals[1], atol=1e-15)
+    np.testing.assert_array_equal(theta[2], 0.0)
+
+
 def test_free_sphere_batch_members_are_independent():
     sphere = Sphere(0.05, (0.0, 0.0, -0.1), density=1100.0)
     scene = paper_scene("planar", medium="water", grasped_object=sphere)
