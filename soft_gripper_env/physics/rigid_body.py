@@ -540,10 +540,10 @@ def planar_body_basis(held, plane_normals):
 @njit(cache=True, error_model="numpy")
 def admissible_rotation(basis, theta):
     """Projects each gripper's rotation over the step ``theta`` (B, 3) [rad], in place, onto the rotations its
-    ``basis`` (B, 6, 6; orthonormal columns) allows. Newton moves the body only along the basis, so a rotation it forbids would otherwise
-    keep the predictor's Δt·ω_old step after step: a body that spun before planar fingers in two planes caught it
-    would turn on at that rate for ever, carrying its holds (and the fingertips on them) around with it. Locking
-    the rotation is the same inelastic impact that stick contact is for translation."""
+    ``basis`` (B, 6, 6; orthonormal columns) allows. Newton moves the body only along the basis, so a rotation it
+    forbids would otherwise keep the predictor's Δt·ω_old step after step: a body that spun before planar fingers
+    in two planes caught it would turn on at that rate for ever, carrying its holds (and the fingertips on them)
+    around with it. Locking the rotation is the same inelastic impact that stick contact is for translation."""
     projected = np.empty(3)
     for b in range(theta.shape[0]):
         projected[:] = 0.0
