@@ -140,7 +140,7 @@ class SoftGripperUnderwaterEnv(gym.Env):
     effort     −0.05 × mean(action²)                                                        [−0.05, 0]
     =========  ===========================================================================  =============
 
-    **Episode.** Each reset draws (by ``self.np_random``) the sphere's radius (0.04–0.06 m), density (1000–1010
+    **Episode.** Each reset draws (by ``self.np_random``) the sphere's radius (0.04–0.06 m), density (990–1030
     kg/m³) and start (grasp point ± (0.015, 0.015, 0.01) m), and a horizontal current: mean 0–0.02 m/s and an
     oscillation of 0–0.02 m/s with a period of 1–3 s, in random directions and phase. ``reset(options=...)`` fixes
     any of them: ``object_radius`` [m], ``object_density`` [kg/m³], ``object_offset`` (3,) [m],

@@ -75,8 +75,9 @@ class GraspTask:
     pressure."""
     object_radius: tuple[float, float] = (0.04, 0.06)
     """Radius of the sphere [m]."""
-    object_density: tuple[float, float] = (1000.0, 1010.0)
-    """Density of the sphere [kg/m³]: near-neutrally buoyant, as soft underwater specimens are."""
+    object_density: tuple[float, float] = (990.0, 1030.0)
+    """Density of the sphere [kg/m³]: near-neutrally buoyant, as soft underwater specimens are, within −1 … +3 % of
+    the water's. It still drifts: a 1030 kg/m³ sphere sinks 8–10 cm in the first second, so a grasp must form soon."""
     grasp_point: tuple[float, float, float] = (0.0, 0.0, -0.1)
     """Where a grasped object should sit, relative to the palm centre [m]."""
     object_offset: tuple[float, float, float] = (0.015, 0.015, 0.01)

@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import soft_gripper_env
-from agents.scripted import PAPER_RATE, RampPolicy, ReactivePolicy
+from agents.scripted import APPROACH_RATE, PAPER_RATE, RampPolicy, ReactivePolicy
 from soft_gripper_env.env import (
     DEFAULT_MAX_EPISODE_STEPS,
     SoftGripperUnderwaterEnv,
@@ -295,7 +295,7 @@ def test_reactive_policy_closes_until_caged_then_squeezes_by_curvature():
     task = GraspTask()
     policy = ReactivePolicy(task, squeeze=0.015, press_rate=0.05)
     layout = observation_slices(task)
-    paper_action = PAPER_RATE / task.max_curvature_rate
+    approach_action = APPROACH_RATE / task.max_curvature_rate
     press_action = 0.05 / task.max_curvature_rate
 
     def act(finger_forces, curvature):
@@ -306,8 +306,8 @@ def test_reactive_policy_closes_until_caged_then_squeezes_by_curvature():
         obs[layout["natural_curvature"]] = curvature
         return policy(obs)
 
-    np.testing.assert_allclose(act([0.0, 0.0, 0.0], 0.0), paper_action)  # nothing touches: the ramp
-    np.testing.assert_allclose(act([0.1, 0.0, 0.0], -0.10), [0.0, paper_action, paper_action])  # finger 0 waits
+    np.testing.assert_allclose(act([0.0, 0.0, 0.0], 0.0), approach_action)  # nothing touches: closing
+    np.testing.assert_allclose(act([0.1, 0.0, 0.0], -0.10), [0.0, approach_action, approach_action])  # 0 waits
     # all touch: each presses toward its own touch κ̄ − 0.015 (finger 0 touched at −0.10, the others now)
     np.testing.assert_allclose(act([0.0, 0.2, 0.3], [-0.10, -0.12, -0.12]), -press_action, rtol=1e-6)
     # within reach of the target in one interval, the action lands on it: κ̄ changes by action·0.5·0.05
@@ -316,7 +316,7 @@ def test_reactive_policy_closes_until_caged_then_squeezes_by_curvature():
     np.testing.assert_allclose(act([9.0, 0.0, 0.5], [-0.12, -0.14, -0.135]), [press_action, press_action, 0.0],
                                atol=1e-5)
     # κ̄ = 0 on every finger: a new episode, the touch curvatures are forgotten
-    np.testing.assert_allclose(act([0.0, 0.0, 0.0], 0.0), paper_action)
+    np.testing.assert_allclose(act([0.0, 0.0, 0.0], 0.0), approach_action)
     batch = np.stack([np.zeros(309, dtype=np.float32)] * 2)
     assert policy(batch).shape == (2, 3)
     with pytest.raises(ValueError, match=r"rate = -2\.0 1/s is outside"):
@@ -325,6 +325,9 @@ def test_reactive_policy_closes_until_caged_then_squeezes_by_curvature():
         ReactivePolicy(task, squeeze=0.5)
     with pytest.raises(ValueError, match=r"ReactivePolicy\.press_rate = 0\.0 1/s is outside"):
         ReactivePolicy(task, press_rate=0.0)
+    with pytest.raises(ValueError, match=r"ReactivePolicy\.approach_rate = 0\.0 1/s is outside the allowed range "
+                                         r"\[-0\.5, 0\)"):
+        ReactivePolicy(task, approach_rate=0.0)
 
 
 def test_reactive_grasp_succeeds_after_a_one_second_hold():
