@@ -334,6 +334,23 @@ def eliminate_rods(band, residual, coupling, free, coupled, x0, x_coupling, body
 
 
 @njit(cache=True, error_model="numpy")
+def admissible_rotation(basis, theta):
+    """Projects one gripper's rotation over the step ``theta`` (3,) [rad], in place, onto the rotations its
+    ``basis`` (6, 6; orthonormal columns) allows. Newton moves the body only along the basis, so a rotation it
+    forbids would otherwise keep the predictor's Δt·ω_old step after step: a body that spun before planar fingers
+    in two planes caught it would turn on at that rate for ever, carrying its holds (and the fingertips on them)
+    around with it. Locking the rotation is the same inelastic impact that stick contact is for translation."""
+    projected = np.zeros(3)
+    for k in range(6):
+        along = 0.0
+        for i in range(3):
+            along += basis[3 + i, k] * theta[i]
+        for i in range(3):
+            projected[i] += along * basis[3 + i, k]
+    theta[:] = projected
+
+
+@njit(cache=True, error_model="numpy")
 def coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, band_width, mass_term,
                    tolerance_inverse, free, held, offsets, projection, body, palm, c, theta, body_old, body_water,
                    basis, body_tolerance, grippers, max_iterations, converged, iterations, ratio, residual):
@@ -344,9 +361,10 @@ def coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, fram
     ``offsets`` (R, N, 3) from its centre in its frame; ``projection`` (R, D, 3) takes world vectors to each rod's
     coordinates. ``c`` and ``theta`` (B, 3), the body's centre and its rotation over the step, hold the start and
     receive the solution; ``body_old`` = (c_old, u_old, R_old, ω_old) at the start of the step; ``body_water``
-    (B, 3) the current at each body [m/s]; ``basis`` (B, 6, 6) the body's admissible motions (zero columns unused);
-    ``body_tolerance`` (6,) [N, N·m]. Writes per gripper ``converged``, ``iterations`` and the largest residual
-    ratio (B,), and every solved rod's final residual (R, n): on held DOFs, the reaction.
+    (B, 3) the current at each body [m/s]; ``basis`` (B, 6, 6) the body's admissible motions (zero columns unused;
+    the start's rotation is projected onto them, :func:`admissible_rotation`); ``body_tolerance`` (6,) [N, N·m].
+    Writes per gripper ``converged``, ``iterations`` and the largest residual ratio (B,), and every solved rod's
+    final residual (R, n): on held DOFs, the reaction.
     """
     n_rods, n_nodes, stride = q.shape
     n = n_nodes * stride
@@ -383,6 +401,7 @@ def coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, fram
         iterations[b] = 0
         ratio[b] = np.inf
         halvings = 0
+        admissible_rotation(basis[b], theta[b])  # Newton's start, as Newton's steps, within the basis
         for f in range(n_fingers):
             touching[f] = held[b * n_fingers + f].any()
         for it in range(max_iterations + 1):
@@ -538,25 +557,6 @@ def planar_body_basis(held, plane_normals):
 
 
 @njit(cache=True, error_model="numpy")
-def admissible_rotation(basis, theta):
-    """Projects each gripper's rotation over the step ``theta`` (B, 3) [rad], in place, onto the rotations its
-    ``basis`` (B, 6, 6; orthonormal columns) allows. Newton moves the body only along the basis, so a rotation it
-    forbids would otherwise keep the predictor's Δt·ω_old step after step: a body that spun before planar fingers
-    in two planes caught it would turn on at that rate for ever, carrying its holds (and the fingertips on them)
-    around with it. Locking the rotation is the same inelastic impact that stick contact is for translation."""
-    projected = np.empty(3)
-    for b in range(theta.shape[0]):
-        projected[:] = 0.0
-        for k in range(6):
-            along = 0.0
-            for i in range(3):
-                along += basis[b, 3 + i, k] * theta[b, i]
-            for i in range(3):
-                projected[i] += along * basis[b, 3 + i, k]
-        theta[b] = projected
-
-
-@njit(cache=True, error_model="numpy")
 def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finger_directions, plane_normals, starts,
                        ends, radii):
     """Each gripper's free body (centre ``c`` (B, 3), ``orientation`` (B, 3, 3), segment ends in its frame (B, 3)
@@ -631,11 +631,7 @@ def solve_with_body(q, q_old, q_pred, natural_curvature, water, dt, elastic, fra
     for k in range(max_corrector_iterations + n_nodes + 1):  # holds-only solves end by N
         free[:, :] = clamp_free
         release_held(free, held, dim)
-        if dim == 3:
-            basis = any_motion
-        else:
-            basis = planar_body_basis(held, plane_normals)
-            admissible_rotation(basis, theta)
+        basis = any_motion if dim == 3 else planar_body_basis(held, plane_normals)
         coupled_newton(q, q_old, q_pred, natural_curvature, water, dt, elastic, frames, terms, band_width, mass_term,
                        tolerance_inverse, free, held, offsets, projection, body, palm, c, theta, body_old, body_water,
                        basis, body_tolerance, grippers, max_iterations, gripper_converged, gripper_iterations,
