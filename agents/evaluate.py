@@ -1,7 +1,7 @@
 """Evaluate a policy on SoftGripperUnderwater-v0 over fixed seeds: success rate, mean return, largest finger force,
 and how the episodes ended.
 
-    python agents/evaluate.py --policy ramp|reactive|ppo [--model-dir out/ppo] [--episodes 20] [--seed 1000]
+    python -m agents.evaluate --policy ramp|reactive|ppo [--model-dir out/ppo] [--episodes 20] [--seed 1000]
         [--json FILE]
 
 Every policy sees the same episodes (seeds seed, seed + 1, ...), so their numbers compare directly.
@@ -11,20 +11,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import gymnasium as gym
+import numpy as np
+from tqdm import tqdm
 
-import gymnasium as gym  # noqa: E402
-import numpy as np  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-import soft_gripper_env  # noqa: E402
-from agents.scripted import RampPolicy, ReactivePolicy  # noqa: E402
-from soft_gripper_env.env import observation_slices  # noqa: E402
-from soft_gripper_env.grasp_task import GraspTask  # noqa: E402
+import soft_gripper_env
+from agents.scripted import RampPolicy, ReactivePolicy
+from soft_gripper_env.env import observation_slices
+from soft_gripper_env.grasp_task import GraspTask
 
 ENDINGS = ("success", "lost", "solver_failure", "not_all_touching", "off_grasp_point", "moving", "held_too_briefly")
 """How an episode can end, in the order :func:`episode_ending` tests them."""

@@ -10,7 +10,7 @@ import numpy as np
 
 from soft_gripper_env.env import observation_slices
 from soft_gripper_env.grasp_task import GraspTask
-from soft_gripper_env.physics.validation import check_range
+from soft_gripper_env.physics import check_range
 
 PAPER_RATE = -0.15
 """The paper's natural-curvature rate [1/s]: κ̄(t) = −0.15·t."""
@@ -27,7 +27,7 @@ class RampPolicy:
         if abs(rate) > task.max_curvature_rate:
             raise ValueError(f"rate = {rate!r} 1/s is outside the allowed range [−{task.max_curvature_rate:g}, "
                              f"{task.max_curvature_rate:g}] 1/s of the task's actions")
-        self.action = np.full(3, rate / task.max_curvature_rate, dtype=np.float32)
+        self.action = np.full(task.gripper.n_fingers, rate / task.max_curvature_rate, dtype=np.float32)
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         return self.action.copy()
@@ -35,7 +35,7 @@ class RampPolicy:
 
 class ReactivePolicy:
     """Closing with contact feedback, finger by finger. Each finger closes at ``approach_rate`` [1/s] until it
-    touches the object (its normal reactions sum to at least ``touch_force`` [N]), and then waits. Once all three
+    touches the object (its normal reactions sum to at least ``touch_force`` [N]), and then waits. Once all of them
     touch, the object is caged: each finger presses on to ``squeeze`` (dimensionless) below the natural curvature at
     which it touched, at no more than ``press_rate`` [1/s], and holds there.
 
@@ -60,15 +60,16 @@ class ReactivePolicy:
         layout = observation_slices(self.task)
         self._forces, self._curvature = layout["normal_forces"], layout["natural_curvature"]
         self._approach_action = approach_rate / self.task.max_curvature_rate
-        self._touched_at = np.full((0, 3), np.nan)  # κ̄ at which each finger first touched; NaN: not yet
+        self._n_fingers = self.task.gripper.n_fingers
+        self._touched_at = np.full((0, self._n_fingers), np.nan)  # κ̄ at which each finger first touched; NaN: not yet
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         observation = np.asarray(observation)
         batch = observation.reshape(-1, observation.shape[-1])
-        force = batch[:, self._forces].reshape(len(batch), 3, -1).sum(axis=-1)
+        force = batch[:, self._forces].reshape(len(batch), self._n_fingers, -1).sum(axis=-1)
         curvature = batch[:, self._curvature].astype(float)
         if len(self._touched_at) != len(batch):
-            self._touched_at = np.full((len(batch), 3), np.nan)
+            self._touched_at = np.full((len(batch), self._n_fingers), np.nan)
         self._touched_at[(curvature == 0.0).all(axis=1)] = np.nan  # a new episode
         touching = np.isnan(self._touched_at) & (force >= self.touch_force)
         self._touched_at[touching] = curvature[touching]
@@ -79,4 +80,4 @@ class ReactivePolicy:
         limit = self.press_rate / self.task.max_curvature_rate
         press = np.clip((self._touched_at - self.squeeze - curvature) / per_action, -limit, limit)
         action = np.where(~touched, self._approach_action, np.where(caged, press, 0.0))
-        return action.astype(np.float32).reshape(observation.shape[:-1] + (3,))
+        return action.astype(np.float32).reshape(observation.shape[:-1] + (self._n_fingers,))

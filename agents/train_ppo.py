@@ -1,6 +1,6 @@
 """Train PPO (Stable-Baselines3) on SoftGripperUnderwater-v0 and compare it with the scripted baselines.
 
-    python agents/train_ppo.py --out out/ppo [--timesteps 300000] [--num-envs 32] [--seed 0] [--eval-episodes 20]
+    python -m agents.train_ppo --out out/ppo [--timesteps 300000] [--num-envs 32] [--seed 0] [--eval-episodes 20]
 
 All episodes of one rollout are stepped in one batched simulator (agents/sb3_vec_env.py); observations and
 rewards are normalised by VecNormalize, whose statistics are saved with the model (out/ppo/ppo_model.zip,
@@ -13,21 +13,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import numpy as np
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
+from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+from tqdm import tqdm
 
-import numpy as np  # noqa: E402
-from stable_baselines3 import PPO  # noqa: E402
-from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback  # noqa: E402
-from stable_baselines3.common.vec_env import VecMonitor, VecNormalize  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-from agents.evaluate import evaluate, load_ppo  # noqa: E402
-from agents.sb3_vec_env import SoftGripperSB3VecEnv  # noqa: E402
-from agents.scripted import RampPolicy, ReactivePolicy  # noqa: E402
-from soft_gripper_env.grasp_task import GraspTask  # noqa: E402
+from agents.evaluate import evaluate, load_ppo
+from agents.sb3_vec_env import SoftGripperSB3VecEnv
+from agents.scripted import RampPolicy, ReactivePolicy
+from soft_gripper_env.grasp_task import GraspTask
 
 
 class ProgressAndCurve(BaseCallback):

@@ -1,6 +1,6 @@
 """Speed of the physics core, single-threaded: the paper's whole run, and batched planar throughput.
 
-    python benchmarks/core_speed.py [--json PATH] [--plot PATH] [--repeats 5]
+    python -m benchmarks.core_speed [--json PATH] [--plot PATH] [--repeats 5]
 
 The paper-scene run is 3 fingers × 100 steps of 0.01 s with N = 20 (backward Euler, Newton to 1e-6·EI/L²),
 timed whole, best of ``--repeats`` after a warm-up (compilation excluded). Batched throughput runs the same
@@ -13,8 +13,7 @@ from __future__ import annotations
 import json
 import sys
 
-from _timing import parse_arguments, save_plot, time_ramp
-
+from benchmarks._timing import parse_arguments, save_plot, time_ramp
 from soft_gripper_env.physics import paper_scene
 
 BATCH_SIZES = (1, 16, 64, 256)

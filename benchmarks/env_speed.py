@@ -5,21 +5,18 @@ scene: planar fingers in water, a free sphere, a current; 5 physics steps per ac
 reset, by the TimeLimit wrapper's truncation for the single env and by autoreset for the vector. The best of
 ``--repeats`` runs counts. Goals (issue 5): ≥ 2,000 steps/s single, ≥ 20,000 env-steps/s batched.
 
-    python benchmarks/env_speed.py [--json FILE] [--plot PNG] [--repeats N] [--steps K]
+    python -m benchmarks.env_speed [--json FILE] [--plot PNG] [--repeats N] [--steps K]
 """
 
 from __future__ import annotations
 
 import json
-import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import gymnasium as gym  # noqa: E402
-from _timing import parse_arguments, save_plot  # noqa: E402  (sets one thread first)
+import gymnasium as gym
 
-import soft_gripper_env  # noqa: E402, F401
+import soft_gripper_env  # noqa: F401
+from benchmarks._timing import parse_arguments, save_plot  # (sets one thread first)
 
 VECTOR_SIZES = (1, 16, 64, 256)
 

@@ -1,6 +1,6 @@
 """What each part of a scene costs per step, and how far the planar and 3-D models agree where both apply.
 
-    python benchmarks/medium_cost.py [--json PATH] [--plot PATH] [--repeats 5]
+    python -m benchmarks.medium_cost [--json PATH] [--plot PATH] [--repeats 5]
 
 The paper's whole ramp (3 fingers, 100 steps of 0.01 s, N = 20) in air, with Stokes drag, in water, and with
 Stokes drag and the paper's fixed ball (contact), single-threaded, best of ``--repeats`` after a warm-up, the
@@ -15,8 +15,8 @@ import json
 import sys
 
 import numpy as np
-from _timing import parse_arguments, save_plot, time_ramp
 
+from benchmarks._timing import parse_arguments, save_plot, time_ramp
 from soft_gripper_env.physics import PAPER_BALL, paper_scene
 
 MEDIA = ("air", "stokes", "water", "stokes+ball")

@@ -1,6 +1,6 @@
 """Speed against error: a work-precision sweep over Δt, node count, integrator, rod model and drag model.
 
-    python benchmarks/speed_vs_error.py --out out/speed_vs_error [--quick] [--repeats N]
+    python -m benchmarks.speed_vs_error --out out/speed_vs_error [--quick] [--repeats N]
 
 Scenes (SI):
 
@@ -30,13 +30,13 @@ import csv
 import itertools
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from _timing import save_plot
 from tqdm import tqdm
 
+from benchmarks._timing import save_plot
 from soft_gripper_env.physics import (
     MassProportionalDamping,
     NewtonSettings,
@@ -46,7 +46,6 @@ from soft_gripper_env.physics import (
     cantilever_scene,
     paper_scene,
 )
-from soft_gripper_env.physics.config import replace
 
 HEADER = ["scene", "model", "integrator", "n_nodes", "dt_s", "wall_s_per_sim_s", "max_tip_error_m",
           "steady_tip_z_m"]

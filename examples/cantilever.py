@@ -1,6 +1,6 @@
 """Settle the shared cantilever benchmark (physics.md §4) and compare its static tip with the exact elastica.
 
-    python examples/cantilever.py --nodes 20 --clamp accurate [--model planar|3d] [--json out/cantilever.json]
+    python -m examples.cantilever --nodes 20 --clamp accurate [--model planar|3d] [--json out/cantilever.json]
 
 Scene (SI): L = 0.1 m free length from the wall at x = 0, r = 0.01 m, E = 386.66 kPa, ρ = 1200 kg/m³,
 g = 9.81 m/s² along −z, clamped horizontally. The exact reference is the inextensible elastica under the rod's
@@ -13,11 +13,11 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
+from examples.analytic import cantilever_elastica_tip
 from soft_gripper_env.physics import NewtonSettings, Simulator, cantilever_scene
-from soft_gripper_env.physics.analytic import cantilever_elastica_tip
-from soft_gripper_env.physics.config import replace
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,6 +1,6 @@
 """Record a video of the paper's scripted ramp (or the reactive controller) grasping the sphere under water.
 
-    python examples/record_ramp_video.py --out out/video [--policy ramp|reactive] [--seed 0] [--model planar|3d]
+    python -m examples.record_ramp_video --out out/video [--policy ramp|reactive] [--seed 0] [--model planar|3d]
 
 Uses Gymnasium's RecordVideo wrapper (moviepy) and writes DIR/<policy>-episode-0.mp4.
 """
@@ -8,17 +8,14 @@ Uses Gymnasium's RecordVideo wrapper (moviepy) and writes DIR/<policy>-episode-0
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import gymnasium as gym
+from tqdm import tqdm
 
-import gymnasium as gym  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-import soft_gripper_env  # noqa: E402
-from agents.scripted import RampPolicy, ReactivePolicy  # noqa: E402
-from soft_gripper_env.grasp_task import GraspTask  # noqa: E402
+import soft_gripper_env
+from agents.scripted import RampPolicy, ReactivePolicy
+from soft_gripper_env.grasp_task import GraspTask
 
 
 def main(argv: list[str] | None = None) -> Path:

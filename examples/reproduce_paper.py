@@ -1,6 +1,6 @@
 """Reproduce the figures of the paper's gripper scene (physics.md §1), one PNG and one tip CSV per case.
 
-    python examples/reproduce_paper.py --out out/paper [--model planar|3d] [--case fig5 fig9 ...]
+    python -m examples.reproduce_paper --out out/paper [--model planar|3d] [--case fig5 fig9 ...]
 
 Scene (SI): three fingers, L = 0.2 m, r = 0.02 m (or the taper r_i = 0.001·(20 − i) m), N = 20, Elastosil MA 4601
 (E = 386.66 kPa, ρ = 1130 kg/m³), gravity 9.81 m/s², per-node Stokes drag at η = 1.0e-3 Pa·s, κ̄(t) = −0.15·t,
@@ -19,6 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
+from examples.plotting import (
+    new_figure,
+    plot_contact_forces,
+    plot_sphere,
+    plot_timelapse,
+    plot_tip_height,
+    save,
+)
 from soft_gripper_env.physics import (
     ELASTOSIL_MA_4601,
     PAPER_BALL,
@@ -27,14 +35,6 @@ from soft_gripper_env.physics import (
     Trajectory,
     paper_scene,
     run_ramp,
-)
-from soft_gripper_env.plotting import (
-    new_figure,
-    plot_contact_forces,
-    plot_sphere,
-    plot_timelapse,
-    plot_tip_height,
-    save,
 )
 
 CASES = ("fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "fig12", "fig12_contact")

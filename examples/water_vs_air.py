@@ -1,6 +1,6 @@
 """The paper's ramp in air, with the paper's Stokes drag, and in water (buoyancy, Morison drag, added mass).
 
-    python examples/water_vs_air.py --out out/water [--model planar|3d] [--time-step 0.01]
+    python -m examples.water_vs_air --out out/water [--model planar|3d] [--time-step 0.01]
 
 Scene (SI): the paper's three Elastosil fingers (L = 0.2 m, r = 0.02 m, N = 20, E = 386.66 kPa, ρ = 1130 kg/m³),
 κ̄(t) = −0.15·t, backward Euler, T = 1 s. Water: ρ_w = 1000 kg/m³, C_n = 1.2, C_t = 0.01, C_a = 1. Writes
@@ -18,8 +18,16 @@ from pathlib import Path
 
 import numpy as np
 
-from soft_gripper_env.physics import AddedMass, MorisonDrag, Simulator, StepContext, Trajectory, paper_scene
-from soft_gripper_env.plotting import new_figure, plot_timelapse, plot_tip_height, save
+from examples.plotting import new_figure, plot_timelapse, plot_tip_height, save
+from soft_gripper_env.physics import (
+    AddedMass,
+    MorisonDrag,
+    Simulator,
+    StepContext,
+    Trajectory,
+    evaluate_force,
+    paper_scene,
+)
 
 MEDIA = ("air", "stokes", "water")
 LABELS = {"air": "air (no fluid force)", "stokes": "paper's Stokes drag, η = 1e-3 Pa·s", "water": "water (Morison)"}
@@ -49,8 +57,8 @@ def run_with_forces(scene) -> tuple[Trajectory, np.ndarray, np.ndarray]:
             dt = scene.time_step
             ctx = StepContext(old.time, q_old[..., :D], 1 / dt, 1 / dt**2)
             acceleration = (state.velocity[0, :1] - old.velocity[0, :1])[..., :D] / dt
-            model.accumulate(disc, ctx, q[..., :D], state.velocity[0, :1][..., :D], acceleration, force[..., :D],
-                             band)
+            evaluate_force(model, disc, scene.fluid, ctx, q[..., :D], state.velocity[0, :1][..., :D], acceleration,
+                           force[..., :D], band)
             peaks.append(np.linalg.norm(force[0, :, :D].sum(axis=0)))
         drag_peak.append(peaks[0] if peaks else 0.0)
         inertia_peak.append(peaks[1] if len(peaks) > 1 else 0.0)

@@ -6,5 +6,5 @@ set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 bash scripts/setup.sh
 out="${1:-out}"
-.venv/bin/python examples/reproduce_paper.py --out "$out/paper"
-.venv/bin/python examples/record_ramp_video.py --out "$out/video"
+.venv/bin/python -m examples.reproduce_paper --out "$out/paper"
+.venv/bin/python -m examples.record_ramp_video --out "$out/video"

@@ -23,9 +23,10 @@ _FORCE_BOUND = 100.0  # [N]
 _OBJECT_BOUND = 1.0  # [m]
 
 
-def observation_slices(task: GraspTask, n_nodes: int = 20, n_fingers: int = 3) -> dict[str, slice]:
-    """Where each part of the observation lies (see the env's spec sheet)."""
+def observation_slices(task: GraspTask) -> dict[str, slice]:
+    """Where each part of the observation lies (see the env's spec sheet); the sizes follow the task's gripper."""
     dim = 2 if task.model == "planar" else 3
+    n_fingers, n_nodes = task.gripper.n_fingers, task.gripper.finger.n_nodes
     sizes = {"node_positions": n_fingers * n_nodes * dim, "node_velocities": n_fingers * n_nodes * dim,
              "natural_curvature": n_fingers, "normal_forces": n_fingers * n_nodes, "object_position": 3,
              "object_velocity": 3}
@@ -33,9 +34,10 @@ def observation_slices(task: GraspTask, n_nodes: int = 20, n_fingers: int = 3) -
     return {name: slice(int(end - size), int(end)) for (name, size), end in zip(sizes.items(), ends, strict=True)}
 
 
-def observation_bounds(task: GraspTask, n_nodes: int = 20, n_fingers: int = 3) -> tuple[np.ndarray, np.ndarray]:
+def observation_bounds(task: GraspTask) -> tuple[np.ndarray, np.ndarray]:
     """The observation's low and high bounds (float32), part by part as in the spec sheet."""
     dim = 2 if task.model == "planar" else 3
+    n_fingers, n_nodes = task.gripper.n_fingers, task.gripper.finger.n_nodes
     nodes = n_fingers * n_nodes * dim
     low = np.concatenate([np.full(nodes, -_POSITION_BOUND), np.full(nodes, -_VELOCITY_BOUND),
                           np.full(n_fingers, task.curvature_range[0]), np.zeros(n_fingers * n_nodes),
@@ -92,12 +94,12 @@ class SoftGripperUnderwaterEnv(gym.Env):
     the fields of :class:`~soft_gripper_env.grasp_task.GraspTask`, as keyword arguments:
     ``gym.make("SoftGripperUnderwater-v0", model="3d", control_dt=0.1)``.
 
-    **Action** ``Box(-1, 1, (3,), float32)``
+    **Action** ``Box(-1, 1, (F,), float32)``, F = 3 fingers for the paper's gripper (``GraspTask.gripper``)
 
     ======  =========================================================  =====
     index   meaning                                                    unit
     ======  =========================================================  =====
-    0–2     natural-curvature rate of finger k, × ``max_curvature_rate`` 1/s
+    0–F−1   natural-curvature rate of finger k, × ``max_curvature_rate`` 1/s
             (0.5 1/s); negative closes the finger
     ======  =========================================================  =====
 
@@ -105,9 +107,9 @@ class SoftGripperUnderwaterEnv(gym.Env):
     curls a finger's natural shape through about 205°, and no pressure). Finite values outside [−1, 1] are clipped.
     NaN, inf, a wrong shape or a non-numeric action raise ``ValueError``.
 
-    **Observation** ``Box(float32)``, in this order (F = 3 fingers, N = 20 nodes; D = 2 for the planar model, where
-    positions are (s, z) in each finger's vertical plane, s along the finger's direction from the palm centre; D = 3
-    in 3-D, world (x, y, z)):
+    **Observation** ``Box(float32)``, in this order (F fingers of N nodes, 3 and 20 for the paper's gripper; D = 2
+    for the planar model, where positions are (s, z) in each finger's vertical plane, s along the finger's direction
+    from the palm centre; D = 3 in 3-D, world (x, y, z)):
 
     ===============  ==========  ====================================================  ======  ==============
     part             size        meaning                                               unit    bounds
@@ -121,7 +123,8 @@ class SoftGripperUnderwaterEnv(gym.Env):
     object velocity  3           sphere velocity relative to the palm (world)          m/s     ±10
     ===============  ==========  ====================================================  ======  ==============
 
-    Sizes: 309 (planar), 429 (3-D). Values are clipped to the bounds, which only a failing solve could reach.
+    Sizes with the paper's gripper: 309 (planar), 429 (3-D). Values are clipped to the bounds, which only a failing
+    solve could reach.
 
     **Reward** (weights in :class:`~soft_gripper_env.grasp_task.RewardWeights`; every term is in
     ``info["reward_terms"]``, and they sum to the reward):
@@ -165,7 +168,7 @@ class SoftGripperUnderwaterEnv(gym.Env):
             raise ValueError(f"render_mode = {render_mode!r} is not one of None, 'rgb_array', 'human'")
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.task.control_dt}
-        self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (self.task.gripper.n_fingers,), np.float32)
         self._low, self._high = observation_bounds(self.task)
         self.observation_space = spaces.Box(self._low, self._high, dtype=np.float32)
         self._batch = GraspBatch(self.task, 1)
@@ -185,7 +188,7 @@ class SoftGripperUnderwaterEnv(gym.Env):
     def step(self, action):
         if self._batch.sim is None:
             raise gym.error.ResetNeeded("call reset() before step()")
-        action = _check_actions(action, (3,))
+        action = _check_actions(action, self.action_space.shape)
         outcome = self._batch.step(action[None, :], np.ones(1, dtype=bool))
         info = _single(_infos(self._batch, outcome.reward_terms, outcome.solver_failure))
         if self.render_mode == "human":
@@ -270,7 +273,7 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.task.control_dt}
-        self.single_action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self.single_action_space = spaces.Box(-1.0, 1.0, (self.task.gripper.n_fingers,), np.float32)
         self._low, self._high = observation_bounds(self.task)
         self.single_observation_space = spaces.Box(self._low, self._high, dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -314,7 +317,7 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
     def step(self, actions):
         if self._batch.sim is None:
             raise gym.error.ResetNeeded("call reset() before step()")
-        actions = _check_actions(actions, (self.num_envs, 3))
+        actions = _check_actions(actions, (self.num_envs,) + self.single_action_space.shape)
         active = ~self._autoreset
         outcome = self._batch.step(actions, active)
         self._steps[active] += 1

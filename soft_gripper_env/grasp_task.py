@@ -7,7 +7,7 @@ vector of them run the same code.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -15,19 +15,20 @@ from .physics import (
     NATURAL_CURVATURE_LIMIT,
     PAPER_BALL,
     Current,
+    Fluid,
+    Gravity,
     GripperDesign,
-    MorisonDrag,
     RodState,
     Scene,
     Simulator,
     Sphere,
+    check_range,
     fluid_forces,
     paper_finger,
     paper_scene,
+    put_grippers,
+    take_grippers,
 )
-from .physics.config import Gravity, replace
-from .physics.simulator import put_grippers, take_grippers
-from .physics.validation import check_range
 
 MODELS = ("planar", "3d")
 
@@ -63,6 +64,9 @@ class GraspTask:
 
     model: str = "planar"
     """Rod model of the fingers: ``"planar"`` or ``"3d"``."""
+    gripper: GripperDesign = field(default_factory=lambda: GripperDesign(paper_finger()))
+    """The gripper: its fingers (design, count and directions) set the sizes of the action and the observation.
+    The paper's three fingers of 20 nodes by default."""
     control_dt: float = 0.05
     """Time between actions [s]; a multiple of ``physics_dt``."""
     physics_dt: float = 0.01
@@ -107,6 +111,8 @@ class GraspTask:
     def __post_init__(self) -> None:
         if self.model not in MODELS:
             raise ValueError(f"GraspTask.model = {self.model!r} is not one of 'planar', '3d'")
+        if not isinstance(self.gripper, GripperDesign):
+            raise ValueError(f"GraspTask.gripper must be a GripperDesign, got {type(self.gripper).__name__}")
         check_range("GraspTask", "physics_dt", self.physics_dt, "s", 0.0, 0.05)
         check_range("GraspTask", "control_dt", self.control_dt, "s", 0.0, 1.0)
         substeps = self.control_dt / self.physics_dt
@@ -198,9 +204,11 @@ def check_options(options: dict | None) -> dict:
 
 def task_scene(task: GraspTask, rng: np.random.Generator, options: dict) -> Scene:
     """The scene of one episode: drawn from the task's ranges by ``rng``, with ``options`` (checked) fixing any of
-    them; or the paper's exact scene (its fixed ball, Stokes drag, no buoyancy) for ``scene="paper"``."""
+    them; or the paper's exact scene (its fixed ball, Stokes drag, no buoyancy) for ``scene="paper"``, with the
+    task's gripper (the paper's, unless the task names another)."""
     if options.get("scene") == "paper":
-        return replace(paper_scene(task.model, grasped_object=PAPER_BALL), time_step=task.physics_dt)
+        return replace(paper_scene(task.model, grasped_object=PAPER_BALL), gripper=task.gripper,
+                       time_step=task.physics_dt)
     # every draw is made, fixed or not, so that fixing one quantity leaves the others' draws unchanged
     radius = rng.uniform(*task.object_radius)
     density = rng.uniform(*task.object_density)
@@ -216,10 +224,8 @@ def task_scene(task: GraspTask, rng: np.random.Generator, options: dict) -> Scen
                       period=options.get("current_period", period), phase=options.get("current_phase", phase))
     sphere = Sphere(options.get("object_radius", radius), tuple(np.add(task.grasp_point, offset)),
                     density=options.get("object_density", density))
-    forces = (Gravity(),) + tuple(replace(f, current=current) if isinstance(f, MorisonDrag) else f
-                                  for f in fluid_forces("water"))
-    return Scene(gripper=GripperDesign(paper_finger()), forces=forces, model=task.model, time_step=task.physics_dt,
-                 grasped_object=sphere)
+    return Scene(gripper=task.gripper, forces=(Gravity(),) + fluid_forces("water"), fluid=Fluid(current=current),
+                 model=task.model, time_step=task.physics_dt, grasped_object=sphere)
 
 
 @dataclass(frozen=True)
@@ -242,10 +248,10 @@ class GraspBatch:
         self.sim: Simulator | None = None
         self.state: RodState | None = None
         self.kind = None
-        B, F = batch_size, 3
+        B, F = batch_size, task.gripper.n_fingers
         self.natural_curvature = np.zeros((B, F))
         """κ̄ of every finger (dimensionless)."""
-        self.normal_force = np.zeros((B, F, paper_finger().n_nodes))
+        self.normal_force = np.zeros((B, F, task.gripper.finger.n_nodes))
         """Compressive reaction of the object on every node, averaged over the last control interval [N]: stick
         contact makes the reaction of a single physics step impulsive, its mean over the interval is not."""
         self.hold_time = np.zeros(B)
@@ -286,7 +292,7 @@ class GraspBatch:
 
     # --- step ------------------------------------------------------------------------------------------------------
     def step(self, action: np.ndarray, active: np.ndarray) -> StepOutcome:
-        """Advances the episodes where ``active`` (B,) by one control interval with ``action`` (B, 3) in [−1, 1]."""
+        """Advances the episodes where ``active`` (B,) by one control interval with ``action`` (B, F) in [−1, 1]."""
         task = self.task
         rate = action * task.max_curvature_rate
         low, high = task.curvature_range

@@ -1,34 +1,53 @@
-"""The physics core: discrete elastic rod fingers, force models and implicit time stepping.
+"""The physics core: discrete elastic rod fingers, force models, contact and implicit time stepping.
 
-Pure NumPy/SciPy with Numba-compiled kernels; it never imports gymnasium, torch or stable-baselines3.
+Pure NumPy/SciPy with Numba-compiled kernels; it never imports gymnasium, torch or stable-baselines3. Its layers,
+each importing only those below it (``docs/design.md``): :mod:`.scene` (descriptions) → :mod:`.kernels` (compiled
+per-rod functions) → :mod:`.solvers` (Newton, the contact corrector, the integrators) → :mod:`.simulator`.
 """
 
-from .config import (
+from .kernels.assembly import StepContext, evaluate_force
+from .scene.design import (
     ELASTOSIL_MA_4601,
-    PAPER_DEFECTIVE_DRAG,
     SOFT_TRANSLUCENT_SILICONE,
-    WATER_VISCOSITY,
     FingerDesign,
     GripperDesign,
     Material,
+    linear_taper,
+    paper_finger,
+)
+from .scene.discretization import Discretization
+from .scene.fluid import WATER, WATER_DENSITY, WATER_VISCOSITY, Current, Fluid
+from .scene.forces import (
+    PAPER_DEFECTIVE_DRAG,
+    AddedMass,
+    BodyLoads,
+    Buoyancy,
+    ForceModel,
+    Gravity,
+    MassProportionalDamping,
+    MorisonDrag,
+    StokesDrag,
+    fluid_forces,
+)
+from .scene.objects import PAPER_BALL, PENETRATION_TOLERANCE, Capsule, ContactSettings, Sphere
+from .scene.scene import (
+    INTEGRATOR_NAMES,
+    NATURAL_CURVATURE_LIMIT,
     NewtonSettings,
     Scene,
     cantilever_scene,
-    linear_taper,
-    paper_finger,
     paper_scene,
 )
-from .contact import PAPER_BALL, PENETRATION_TOLERANCE, Capsule, ContactReport, ContactSettings, Sphere
-from .discretization import Discretization
-from .forces import Buoyancy, ForceModel, Gravity, MassProportionalDamping, StepContext, StokesDrag
-from .hydrodynamics import WATER_DENSITY, AddedMass, Current, MorisonDrag, fluid_forces
-from .simulator import NATURAL_CURVATURE_LIMIT, RodState, Simulator, StepResult, Trajectory, run_ramp
+from .scene.validation import check_range
+from .simulator import Simulator, Trajectory, run_ramp
+from .solvers.records import ContactReport, RodState, StepResult, put_grippers, take_grippers
 
 __all__ = [
-    "ELASTOSIL_MA_4601", "PAPER_DEFECTIVE_DRAG", "SOFT_TRANSLUCENT_SILICONE", "WATER_VISCOSITY", "FingerDesign",
-    "GripperDesign", "Material", "NewtonSettings", "Scene", "cantilever_scene", "linear_taper", "paper_finger",
-    "paper_scene", "Discretization", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping", "StokesDrag",
-    "RodState", "Simulator", "StepResult", "Trajectory", "run_ramp", "StepContext", "WATER_DENSITY", "AddedMass",
-    "Current", "MorisonDrag", "fluid_forces", "PAPER_BALL", "PENETRATION_TOLERANCE", "ContactReport",
-    "ContactSettings", "Sphere", "Capsule", "NATURAL_CURVATURE_LIMIT",
+    "ELASTOSIL_MA_4601", "SOFT_TRANSLUCENT_SILICONE", "FingerDesign", "GripperDesign", "Material", "linear_taper",
+    "paper_finger", "Discretization", "WATER", "WATER_DENSITY", "WATER_VISCOSITY", "Current", "Fluid",
+    "PAPER_DEFECTIVE_DRAG", "AddedMass", "BodyLoads", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping",
+    "MorisonDrag", "StokesDrag", "fluid_forces", "PAPER_BALL", "PENETRATION_TOLERANCE", "Capsule", "ContactSettings",
+    "Sphere", "INTEGRATOR_NAMES", "NATURAL_CURVATURE_LIMIT", "NewtonSettings", "Scene", "cantilever_scene",
+    "paper_scene", "check_range", "Simulator", "Trajectory", "run_ramp", "ContactReport", "RodState", "StepResult",
+    "put_grippers", "take_grippers", "StepContext", "evaluate_force",
 ]

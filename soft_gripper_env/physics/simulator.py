@@ -1,16 +1,13 @@
-"""Batched implicit time stepping of the gripper's fingers.
+"""The simulator: a batch of grippers stepped in time, their state, and what each step reports.
 
 Every state array carries a leading batch axis B (grippers) and a finger axis F. Internally the B·F rods are
-flattened to one rod axis R. The whole Newton loop runs in compiled kernels (:mod:`.assembly` for rods on their own
-or against a fixed object, :func:`.rigid_body.coupled_newton` for rods and a free body); this module sets up the
-step, runs the contact corrector around the solves and halves steps that fail. Each rod (or gripper, with a free
-body) stops iterating as soon as it has converged, so its result does not depend on what else shares its batch.
-
-Backward Euler, on the free DOFs q (physics.md §1):
-
-    M·(q − q_old − Δt·v_old)/Δt² − f(q, (q − q_old)/Δt) = 0,
-
-solved by Newton's method started from the predictor q_old + Δt·v_old plus the last step's motion, Δt²·a_old.
+flattened to one rod axis R. The whole step runs in compiled solvers (:mod:`.solvers`): Newton's method for rods on
+their own (:func:`~.solvers.newton.advance_rods`) and, with an object, the contact corrector around it
+(:func:`~.solvers.corrector.solve_with_contact`), fixed or free. This module holds the batch's arrays (the
+discretization, the force terms, the water's currents, the grasped bodies), bundles them for the kernels, lets the
+scene's integrator compose implicit steps (:meth:`Simulator.implicit_step`), halves steps that fail and reports
+contact. Each rod (or gripper, with a free body) stops iterating as soon as it has converged, so its result does not
+depend on what else shares its batch.
 """
 
 from __future__ import annotations
@@ -21,86 +18,106 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .assembly import advance_rods, assemble, finish, midpoint_end, newton_solve, per_gripper, predict
-from .config import Scene
-from .contact import (
-    ContactReport,
-    contact_changes,
-    corrector_continues,
-    normal_reactions,
-    object_in_rod_frames,
-    reachable,
-    release_held,
-    update_holds,
+from .kernels.assembly import RodArrays, StepInputs, assemble
+from .kernels.body import BodyArrays, BodyState, palm_reactions
+from .kernels.contact import normal_reactions, object_in_rod_frames
+from .kernels.forces import rod_water_velocity
+from .kernels.rod_3d import rod3d_elastic, rod3d_update_frames
+from .kernels.rod_planar import planar_elastic
+from .scene.fluid import Current, CurrentBatch
+from .scene.forces import BodyLoads, ForceTerms
+from .scene.scene import NATURAL_CURVATURE_LIMIT, Scene
+from .solvers.corrector import ContactGeometry, release_held, solve_with_contact
+from .solvers.integrators import INTEGRATORS
+from .solvers.newton import (
+    BodyMotion,
+    Holds,
+    SolverArrays,
+    SolveResult,
+    advance_rods,
+    finish,
+    midpoint_end,
+    per_gripper,
+    predict,
 )
-from .discretization import Discretization
-from .forces import ForceTerms
-from .hydrodynamics import Current, CurrentBatch, MorisonDrag, rod_water_velocity
-from .integrators import INTEGRATORS, evolve, record
-from .rigid_body import BodyModel, solve_with_body
-from .rod_3d import rod3d_elastic, rod3d_update_frames
-from .rod_planar import planar_elastic
-
-NATURAL_CURVATURE_LIMIT = 2.0
-"""Largest |κ̄| a step accepts (dimensionless): a natural turning angle of 90° per node, 2·atan(κ̄/2). The integrated
-curvature κ = 2·tan(φ/2) is singular at φ = 180°, and a finger already curls 18 × 90° = 1620° at this limit. The
-same clip as dismech-rl's."""
+from .solvers.records import ContactReport, RodState, StepResult, _set, evolve, put_grippers, record, take_grippers
 
 
-@dataclass(frozen=True, eq=False)
-class RodState:
-    """The state of B grippers at one instant.
+class BodyModel:
+    """Mass properties and external loads of the free spheres or capsules of a batch of B grippers, one each, as
+    arrays with a leading batch axis (body frame = world at t = 0). :meth:`load` sets one gripper's body."""
 
-    ``q`` and ``velocity`` are (B, F, N, S) in the layout of :class:`~.discretization.Discretization`
-    ([m] and [m/s]; twist angles [rad] and [rad/s]). The 3-D model also carries the reference frame of every edge,
-    which is part of the state because it is transported in time: ``tangent`` and ``director`` (B, F, N − 1, 3),
-    ``reference_twist`` (B, F, N) [rad]. They are None in the planar model.
-    """
+    def __init__(self, loads: BodyLoads, batch_size: int, palm_stiffness: float = 0.0,
+                 palm_radius: float = 0.0) -> None:
+        self.palm_stiffness = palm_stiffness
+        """k of the palm disc in the plane z = 0 [N/m] (:class:`~.scene.objects.ContactSettings`)."""
+        self.palm_radius = palm_radius
+        """Its radius [m]."""
+        self.loads = loads
+        """The scene's force models' constants for the body (:class:`~.scene.forces.BodyLoads`)."""
+        B = batch_size
+        self.radius = np.zeros(B)
+        """Radius of each body [m], (B,)."""
+        self.mass = np.zeros(B)
+        """m [kg], (B,)."""
+        self.inertia = np.zeros((B, 3, 3))
+        """Rotational inertia about the centre, body frame [kg·m²], (B, 3, 3)."""
+        self.added_mass = np.zeros((B, 3, 3))
+        """Added-mass tensor, body frame [kg], (B, 3, 3)."""
+        self.weight = np.zeros(B)
+        """Net weight along −z, (m − ρ_w·V)·g [N], (B,)."""
+        self.normal_drag = np.zeros(B)
+        """½·ρ_w·C_n·D·h of a capsule's cylinder, on the velocity normal to its axis [kg/m]; 0 for a sphere."""
+        self.isotropic_drag = np.zeros(B)
+        """½·ρ_w·C_d·π·r² of the sphere (or a capsule's two end caps together) [kg/m]."""
+        self.axis = np.tile([0.0, 0.0, 1.0], (B, 1))
+        """The capsule's axis in the body frame (B, 3); any unit vector for a sphere."""
+        self.segment = (np.zeros((B, 3)), np.zeros((B, 3)))
+        """The object's segment ends relative to its centre, body frame [m], (B, 3) each (zero for a sphere)."""
 
-    q: np.ndarray
-    velocity: np.ndarray
-    time: float
-    """Simulated time [s]."""
-    acceleration: np.ndarray | None = None
-    """Mean acceleration over the last step, (v − v_old)/Δt, (B, F, N, S) [m/s²]; None before the first step.
-    It only improves Newton's starting guess."""
-    tangent: np.ndarray | None = None
-    director: np.ndarray | None = None
-    reference_twist: np.ndarray | None = None
-    held: np.ndarray | None = None
-    """Nodes held on the grasped object's surface, (B, F, N) bool; None in a scene without an object."""
-    hold_offset: np.ndarray | None = None
-    """For a free object: each held node's offset from the object's centre in the object's frame [m], (B, F, N, 3)."""
-    body_position: np.ndarray | None = None
-    """Centre of a free object [m], (B, 3); None unless the scene's object is free."""
-    body_velocity: np.ndarray | None = None
-    """Its velocity [m/s], (B, 3)."""
-    body_orientation: np.ndarray | None = None
-    """Its orientation, body to world, (B, 3, 3)."""
-    body_angular_velocity: np.ndarray | None = None
-    """Its angular velocity [rad/s], (B, 3)."""
+    def load(self, index: int, obj) -> None:
+        """Sets gripper ``index``'s body to the free :class:`~.scene.objects.Sphere` or
+        :class:`~.scene.objects.Capsule` ``obj``."""
+        r = obj.radius
+        start, end = (np.asarray(p, dtype=float) for p in obj.segment)
+        center = 0.5 * (start + end)
+        length = float(np.linalg.norm(end - start))
+        axis = (end - start) / length if length > 0 else np.array([0.0, 0.0, 1.0])
+        along = np.outer(axis, axis)
+        across = np.eye(3) - along
+        cylinder, caps = math.pi * r**2 * length, 4.0 / 3.0 * math.pi * r**3
+        m_cylinder, m_caps = obj.density * cylinder, obj.density * caps
+        self.radius[index] = r
+        self.mass[index] = m_cylinder + m_caps
+        self.inertia[index] = (m_cylinder * r**2 / 2 + m_caps * 2 * r**2 / 5) * along + (
+            m_cylinder * (length**2 / 12 + r**2 / 4) + m_caps * (2 * r**2 / 5 + length**2 / 4 + 3 * length * r / 8)
+        ) * across
+        loads = self.loads
+        self.added_mass[index] = loads.cylinder_added_mass * cylinder * across \
+            + loads.sphere_added_mass * caps * np.eye(3)
+        self.weight[index] = (m_cylinder + m_caps) * loads.gravity - loads.buoyancy * (cylinder + caps)
+        self.normal_drag[index] = loads.normal_drag * 2 * r * length
+        self.isotropic_drag[index] = loads.sphere_drag * math.pi * r**2
+        self.axis[index] = axis
+        self.segment[0][index] = start - center
+        self.segment[1][index] = end - center
 
+    def arrays(self) -> BodyArrays:
+        """The bodies' arrays as the compiled kernels take them (views: :meth:`load` updates them)."""
+        return BodyArrays(self.mass, self.inertia, self.added_mass, self.weight, self.normal_drag, self.isotropic_drag,
+                          self.axis, self.segment[0], self.segment[1], self.radius, float(self.palm_stiffness),
+                          float(self.palm_radius))
 
-@dataclass(frozen=True, eq=False)
-class StepResult:
-    """What one implicit step returns. Per-gripper arrays have shape (B,)."""
-
-    state: RodState
-    converged: np.ndarray
-    """Whether Newton's method met its tolerance on every finger of the gripper."""
-    newton_iterations: np.ndarray
-    """Linear solves (Newton iterations) the slowest finger needed."""
-    residual: np.ndarray
-    """Final residual: the largest free-DOF residual divided by its tolerance (≤ 1 when converged; dimensionless)."""
-    substeps: np.ndarray
-    """Substeps the step took, (B,): 1 unless Newton failed or the contact corrector spent its budget, and the step
-    was halved (adaptive substepping)."""
-    contact: ContactReport | None = None
-    """Contact reactions of the step; None in a scene without an object."""
+    def palm_reaction(self, c, c_old, orientation, orientation_old, dt) -> np.ndarray:
+        """The force of each body on the palm [N], (B, 3), over a step from ``c_old`` to ``c`` of ``dt`` [s]."""
+        reaction = np.zeros_like(c)
+        palm_reactions(self.arrays(), c, c_old, orientation, orientation_old, dt, reaction)
+        return reaction
 
 
 class Simulator:
-    """Steps a batch of identical grippers of one :class:`~.config.Scene` in time.
+    """Steps a batch of grippers in time: one :class:`~.scene.scene.Scene` for all, or one per gripper that differ
+    only in the grasped object's size, place, density and velocity and in the water's current.
 
     >>> sim = Simulator(paper_scene())
     >>> state = sim.initial_state()
@@ -127,50 +144,50 @@ class Simulator:
         self.scenes = scenes * B if len(scenes) == 1 else scenes
         """Each gripper's scene: they differ at most in the grasped object's size, place, density and velocity,
         and in the water's current (:meth:`set_scene`)."""
-        self.disc = Discretization.from_scene(scene)
+        self.disc = disc = scene.discretization()
+        R, D, F = self.n_rods, disc.dim, self.n_fingers
         self._integrator = INTEGRATORS[scene.integrator]
         self._subsimulators: dict[int, Simulator] = {}
-        self._tolerance_inverse = np.where(self.disc.free, 1.0 / self.disc.residual_scale, 0.0)
-        self._per_step_cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        self._clamp_free = np.tile(self.disc.free, (self.n_rods, 1))
-        self._all_rods = np.ones(self.n_rods, dtype=bool)
-        self._no_shift = np.zeros((self.n_rods, self.disc.dim))
-        self._first_free_node = 0 if scene.gripper.finger.clamp == "free" else 2
-        self._force_tolerance = self.disc.residual_scale[0]
+        self._tolerance_inverse = np.where(disc.free, 1.0 / disc.residual_scale, 0.0)
+        self._per_step_cache: dict[float, SolverArrays] = {}
+        self._clamp_free = np.tile(disc.free, (R, 1))
+        self._force_tolerance = disc.residual_scale[0]
         """Newton's tolerance on a force DOF, relative_tolerance·EI/L² [N]."""
         self._structure = _structure(scene)
-        disc = self.disc
-        self._force_terms = ForceTerms.of(disc, scene.forces).arrays()
-        self._elastic = (disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness, disc.twist_stiffness,
-                         disc.voronoi_length)
-        self._no_frames = (np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))  # planar: none
+        self._force_terms = ForceTerms.of(disc, scene.forces, scene.fluid)
+        self._rods = RodArrays.of(disc)  # 3-D: the frames are the state's, bundled per step (_rod_arrays)
         self._no_acceleration = np.empty((0, 0, 0))
-        drag = [f for f in scene.forces if isinstance(f, MorisonDrag)]
-        self._currents = CurrentBatch(B) if drag else None
+        moving_water = self._force_terms.drag_normal.size > 0  # only drag feels the current
+        self._currents = CurrentBatch(B) if moving_water else None
         self._water_cache: tuple[float, tuple[np.ndarray, np.ndarray] | None] = (math.nan, None)
-        if not drag:
+        if not moving_water:
             still = np.zeros((B, 3))
-            self._water_cache = (math.inf, (still, rod_water_velocity(self.disc, still)))  # for all time
-        self._object = None
-        self._body = None
+            self._water_cache = (math.inf, (still, rod_water_velocity(disc, still)))  # for all time
+        directions = disc.finger_directions
+        plane_normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(F)], axis=1)
+        if scene.model == "3d":
+            projection = np.broadcast_to(np.eye(3), (F, 3, 3))
+        else:
+            projection = np.stack([directions, np.tile([0.0, 0.0, 1.0], (F, 1))], axis=1)
+        self._projection = np.tile(projection, (B, 1, 1))  # rod coordinates from world, (R, D, 3)
         obj = scene.grasped_object
+        self._has_object = obj is not None
+        self._body = None
         if obj is not None and obj.free:
-            self._body = BodyModel(scene.forces, B, scene.contact.palm_stiffness, scene.contact.palm_radius)
-            directions = self.disc.finger_directions
-            self._plane_normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(len(directions))], axis=1)
-            """Normal of each finger's vertical plane (F, 3)."""
-            if scene.model == "3d":
-                projection = np.broadcast_to(np.eye(3), (len(directions), 3, 3))
-            else:
-                projection = np.stack([directions, np.tile([0.0, 0.0, 1.0], (len(directions), 1))], axis=1)
-            self._projection = np.tile(projection, (B, 1, 1))  # rod coordinates from world, (R, D, 3)
-            force_tolerance = self._force_tolerance
-            length = scene.gripper.finger.length
-            self._body_tolerance = np.repeat([force_tolerance, force_tolerance * length], 3)  # [N], [N·m]
-            self._any_motion = np.tile(np.eye(6), (B, 1, 1)) if scene.model == "3d" else np.empty((0, 6, 6))
-        elif obj is not None:
-            R, D = self.n_rods, self.disc.dim
-            self._object = (np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), np.zeros(R, dtype=bool))
+            self._body = BodyModel(BodyLoads.total(scene.forces, scene.fluid), B, scene.contact.palm_stiffness,
+                                   scene.contact.palm_radius)
+            any_motion = np.tile(np.eye(6), (B, 1, 1)) if scene.model == "3d" else np.empty((0, 6, 6))
+            self._geometry = ContactGeometry(np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), directions,
+                                             plane_normals, any_motion)
+        else:  # rods on their own or against a fixed object: no body moves, and none is held to
+            self._geometry = ContactGeometry(np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), directions,
+                                             plane_normals, np.empty((0, 6, 6)))
+            self._still_body = (BodyModel(BodyLoads(), 0).arrays(), BodyMotion(
+                False, np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3, 3)),
+                BodyState(np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3, 3)), np.empty((0, 3))),
+                np.empty((0, 3))))
+            self._rods_alone = (Holds(np.zeros((R, disc.n_nodes), dtype=bool), np.empty((0, 0, 3)),
+                                self._projection), *self._still_body, self._geometry.any_motion)
         for index, each in enumerate(self.scenes):
             if each is not scene and _structure(each) != self._structure:
                 raise ValueError(f"Simulator.scene[{index}] differs from scene[0] in more than the grasped object's "
@@ -196,20 +213,19 @@ class Simulator:
     def _load(self, index: int, scene: Scene) -> None:
         """Writes gripper ``index``'s object and current into the per-gripper arrays (the scene already checked)."""
         if self._currents is not None:
-            self._currents.load(index, next(f for f in scene.forces if isinstance(f, MorisonDrag)).current)
+            self._currents.load(index, scene.fluid.current)
         obj = scene.grasped_object
         if self._body is not None:
             self._body.load(index, obj)
-        elif self._object is not None:
-            F = self.n_fingers
-            planar = scene.model == "planar"
-            rods = slice(index * F, (index + 1) * F)
-            starts, ends, radii = object_in_rod_frames(obj, self.disc.finger_directions, planar)
-            self._object[0][rods], self._object[1][rods], self._object[2][rods] = starts, ends, radii
-            self._object[3][rods] = reachable(obj, self.disc.finger_directions, scene.gripper.finger.length, planar)
+        elif obj is not None:
+            rods = slice(index * self.n_fingers, (index + 1) * self.n_fingers)
+            geometry = self._geometry
+            geometry.starts[rods], geometry.ends[rods], geometry.radii[rods] = object_in_rod_frames(
+                obj, self.disc.finger_directions, scene.model == "planar")
 
     @property
     def n_rods(self) -> int:
+        """Rods in the batch, B·F."""
         return self.batch_size * self.n_fingers
 
     def initial_state(self) -> RodState:
@@ -245,20 +261,20 @@ class Simulator:
         disc = self.disc
         R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
         q = np.ascontiguousarray(state.q.reshape(R, N, S))
-        kbar = self._natural_curvature(natural_curvature)
+        per_rod = self._natural_curvature(natural_curvature)
         force = np.zeros((R, N, S))
         band = np.zeros((R, N * S, disc.band_width + 1))
         if disc.model == "3d":
             energy = rod3d_elastic(q, *self._frames(state), disc.rest_edge_length, disc.stretch_stiffness,
-                                   disc.bend_stiffness, disc.twist_stiffness, disc.voronoi_length, kbar, force, band,
-                                   False)
+                                   disc.bend_stiffness, disc.twist_stiffness, disc.voronoi_length, per_rod, force,
+                                   band, False)
         else:
             energy = planar_elastic(q, disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness,
-                                    disc.voronoi_length, kbar, force, band, False)
+                                    disc.voronoi_length, per_rod, force, band, False)
         velocity = state.velocity.reshape(R, -1)
         energy = energy + 0.5 * (velocity**2) @ disc.dof_mass
         for model in self.scene.forces:
-            potential = model.potential_energy(disc, q[..., :D])
+            potential = model.potential_energy(disc, q[..., :D], self.scene.fluid)
             if potential is not None:
                 energy = energy + potential
         return energy.reshape(self.batch_size, self.n_fingers).sum(axis=1)
@@ -267,18 +283,18 @@ class Simulator:
         """κ̄ per rod (R,), from a scalar, (F,) or (B, F), checked."""
         if isinstance(natural_curvature, (float, int)) and abs(natural_curvature) <= NATURAL_CURVATURE_LIMIT:
             return np.full(self.n_rods, float(natural_curvature))  # the common scalar case, fast
-        kbar = np.asarray(natural_curvature, dtype=float)
-        if kbar.shape != (self.batch_size, self.n_fingers):
+        value = np.asarray(natural_curvature, dtype=float)
+        if value.shape != (self.batch_size, self.n_fingers):
             try:
-                kbar = np.broadcast_to(kbar, (self.batch_size, self.n_fingers))
+                value = np.broadcast_to(value, (self.batch_size, self.n_fingers))
             except ValueError:
-                raise ValueError(f"natural_curvature has shape {kbar.shape}; expected a scalar, (F,) = "
+                raise ValueError(f"natural_curvature has shape {value.shape}; expected a scalar, (F,) = "
                                  f"({self.n_fingers},) or (B, F) = ({self.batch_size}, {self.n_fingers})") from None
-        if np.abs(kbar).max() <= NATURAL_CURVATURE_LIMIT:  # False for NaN too
-            return np.ascontiguousarray(kbar).reshape(-1)
-        if not np.all(np.isfinite(kbar)):
+        if np.abs(value).max() <= NATURAL_CURVATURE_LIMIT:  # False for NaN too
+            return np.ascontiguousarray(value).reshape(-1)
+        if not np.all(np.isfinite(value)):
             raise ValueError("natural_curvature (dimensionless) must be finite")
-        raise ValueError(f"natural_curvature = {kbar.flat[np.abs(kbar).argmax()]:g} (dimensionless) is outside "
+        raise ValueError(f"natural_curvature = {value.flat[np.abs(value).argmax()]:g} (dimensionless) is outside "
                          f"the allowed range [−{NATURAL_CURVATURE_LIMIT:g}, {NATURAL_CURVATURE_LIMIT:g}]: "
                          f"κ = 2·tan(φ/2) is singular at a turning angle φ = 180°")
 
@@ -287,21 +303,21 @@ class Simulator:
 
         ``natural_curvature`` is a scalar, (F,) or (B, F). It is held constant over the step.
         """
-        kbar = self._natural_curvature(natural_curvature)
-        return self._step_adaptive(state, kbar, self.scene.time_step, self.scene.newton.max_step_halvings)
+        return self._step_adaptive(state, self._natural_curvature(natural_curvature), self.scene.time_step,
+                                   self.scene.newton.max_step_halvings)
 
-    def _step_adaptive(self, state: RodState, kbar: np.ndarray, dt: float, halvings: int) -> StepResult:
+    def _step_adaptive(self, state: RodState, natural_curvature: np.ndarray, dt: float, halvings: int) -> StepResult:
         """One step of the scene's integrator; grippers whose Newton solve fails take two half steps instead, each
         of which may be halved again while ``halvings`` allows. Only the failed grippers are re-run."""
-        result = self._integrator.advance(self, state, kbar, dt)
+        result = self._integrator.advance(self, state, natural_curvature, dt)
         settled = result.converged if result.contact is None else result.converged & result.contact.resolved
         if halvings == 0 or settled.all():
             return result
         failed = np.nonzero(~settled)[0]  # a corrector that spent its budget is retried in halves too
         sub = self._subsimulator(failed)
-        sub_kbar = kbar.reshape(self.batch_size, -1)[failed].ravel()
-        first = sub._step_adaptive(take_grippers(state, failed), sub_kbar, 0.5 * dt, halvings - 1)
-        second = sub._step_adaptive(first.state, sub_kbar, 0.5 * dt, halvings - 1)
+        sub_natural_curvature = natural_curvature.reshape(self.batch_size, -1)[failed].ravel()
+        first = sub._step_adaptive(take_grippers(state, failed), sub_natural_curvature, 0.5 * dt, halvings - 1)
+        second = sub._step_adaptive(first.state, sub_natural_curvature, 0.5 * dt, halvings - 1)
         merged = evolve(put_grippers(result.state, failed, second.state), time=result.state.time)
         contact = result.contact
         if contact is not None:
@@ -335,17 +351,17 @@ class Simulator:
         below the Newton tolerance, which makes the result an equilibrium of the static forces alone. The returned
         state is at rest at the same time as ``state``.
         """
-        kbar = self._natural_curvature(natural_curvature)
+        per_rod = self._natural_curvature(natural_curvature)
         pseudo_step = self.scene.time_step
         zero = np.zeros_like(state.velocity)
         result = None
         for _ in range(max_steps):
-            result = self._advance(state, kbar, pseudo_step, zero)
+            result = self.implicit_step(state, per_rod, pseudo_step, zero)
             if not np.all(result.converged):
                 pseudo_step *= 0.25
                 continue
             state = evolve(result.state, velocity=zero, time=state.time, acceleration=None)
-            static = self.static_residual(state, kbar)
+            static = self.static_residual(state, per_rod)
             if np.all(static <= 1.0):
                 return evolve(result, state=state, residual=static)
             pseudo_step = min(2.0 * pseudo_step, 1.0e6)
@@ -378,16 +394,21 @@ class Simulator:
         return (state.tangent.reshape(R, N - 1, 3), state.director.reshape(R, N - 1, 3),
                 state.reference_twist.reshape(R, N))
 
-    def _assemble(self, q, q_old, q_pred, frames_old, kbar, time, dt, hessian=True):
+    def _assemble(self, q, q_old, q_pred, frames_old, natural_curvature, time, dt, hessian=True):
         """Total force [N] on every DOF (R, N, S) and the band of −∂f/∂q (R, n, kd+1) at coordinates q, for a
         backward-Euler step of length ``dt`` from ``q_old`` with predictor ``q_pred`` = q_old + Δt·v_old."""
         disc = self.disc
         R = q.shape[0]
         force = np.empty(q.shape)
         band = np.empty((R, disc.n_dofs, disc.band_width + 1))
-        assemble(q, q_old, q_pred, kbar, self._water(time)[1], dt, self._elastic, frames_old or self._no_frames,
-                 self._force_terms, hessian, force, band)
+        step = StepInputs(q_old, q_pred, natural_curvature, self._water(time)[1], dt)
+        assemble(q, step, self._rod_arrays(frames_old), self._force_terms, hessian, force, band)
         return force, band
+
+    def _rod_arrays(self, frames) -> RodArrays:
+        """The rods' constants with the 3-D frames of a state (:meth:`_frames`), as the kernels take them."""
+        return self._rods if frames is None else self._rods._replace(tangent=frames[0], director=frames[1],
+                                                                     reference_twist=frames[2])
 
     def _water(self, time: float) -> tuple[np.ndarray, np.ndarray]:
         """The current at ``time`` at every gripper (B, 3) and as every rod sees it (R, D) [m/s], kept for the solves
@@ -406,104 +427,34 @@ class Simulator:
         release_held(free, held, disc.dim)
         return free
 
-    def _per_step(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """For steps of ``dt``: the mass term M/Δt² of every DOF (n,), and 1/tolerance of every DOF of every rod
-        (R, n). The tolerance is the scene's, raised where needed above the roundoff of the inertial term
-        M·(q − q_pred)/Δt², which at tiny steps would otherwise make it unreachable."""
+    def _per_step(self, dt: float) -> SolverArrays:
+        """The solvers' settings for steps of ``dt`` (:class:`~.solvers.newton.SolverArrays`): among them the mass
+        term M/Δt² of every DOF (n,), and 1/tolerance of every DOF of every rod (R, n). The tolerance is the scene's,
+        raised where needed above the roundoff of the inertial term M·(q − q_pred)/Δt², which at tiny steps would
+        otherwise make it unreachable."""
         if dt not in self._per_step_cache:
-            disc = self.disc
+            disc, scene = self.disc, self.scene
             mass_term = disc.dof_mass / dt**2
-            roundoff = 64.0 * np.finfo(float).eps * mass_term * self.scene.gripper.finger.length
+            roundoff = 64.0 * np.finfo(float).eps * mass_term * scene.gripper.finger.length
             tolerance = np.maximum(disc.residual_scale, roundoff)
-            self._per_step_cache[dt] = mass_term, np.tile(np.where(disc.free, 1.0 / tolerance, 0.0),
-                                                          (self.n_rods, 1))
+            force_tolerance, length = self._force_tolerance, scene.gripper.finger.length
+            self._per_step_cache[dt] = SolverArrays(
+                mass_term=mass_term, tolerance_inverse=np.tile(np.where(disc.free, 1.0 / tolerance, 0.0),
+                                                               (self.n_rods, 1)),
+                clamp_free=self._clamp_free,
+                body_tolerance=np.repeat([force_tolerance, force_tolerance * length], 3),  # [N], [N·m]
+                max_iterations=scene.newton.max_iterations, n_fingers=self.n_fingers,
+                max_corrector_iterations=scene.contact.max_corrector_iterations,
+                first_free_node=0 if scene.gripper.finger.clamp == "free" else 2,
+                force_tolerance=float(force_tolerance), finger_length=float(length))
         return self._per_step_cache[dt]
 
-    def _newton(self, q, q_old, q_pred, frames_old, kbar, time, dt, free, rods):
-        """Newton's method for the rods where ``rods`` is True; ``q`` (R, N, S) holds the start and receives the
-        solution. Returns per-rod converged, iterations and residual ratio (R,), and the residual
-        M·(q − q_pred)/Δt² − f at the solution (R, n): on held DOFs, the contact reaction."""
-        disc = self.disc
-        R = q.shape[0]
-        converged = np.zeros(R, dtype=bool)
-        iterations = np.zeros(R, dtype=np.int64)
-        ratio = np.full(R, np.inf)
-        residual = np.zeros((R, disc.n_dofs))
-        mass_term, tolerance_inverse = self._per_step(dt)
-        newton_solve(q, q_old, q_pred, kbar, self._water(time)[1], dt, self._elastic, frames_old or self._no_frames,
-                     self._force_terms, disc.band_width, mass_term, tolerance_inverse, free, rods,
-                     self.scene.newton.max_iterations, converged, iterations, ratio, residual)
-        return converged, iterations, ratio, residual
-
-    def _solve_with_contact(self, state, q, q_old, q_pred, frames_old, kbar, dt):
-        """The predictor–corrector (see :mod:`.contact`): solve, release adhesive holds, hold new penetrations, and
-        solve the rods that changed again (each from its last solution), until none does or the corrector's budget is
-        spent. ``q`` (R, N, S) holds Newton's start and receives the solution."""
-        disc = self.disc
-        R, N, D = self.n_rods, disc.n_nodes, disc.dim
-        held = state.held.reshape(R, N).copy() if state.held is not None else np.zeros((R, N), dtype=bool)
-        hold_at = q_old[..., :D].copy()  # nodes already held stay where they are
-        converged = np.zeros(R, dtype=bool)
-        iterations = np.zeros(R, dtype=np.int64)
-        ratio = np.full(R, np.inf)
-        residual = np.zeros((R, disc.n_dofs))
-        corrector = np.zeros(R, dtype=np.int64)
-        rods = self._all_rods.copy()
-        starts, ends, radii, searched = self._object
-        adhesive, new_hold = np.empty((R, N), dtype=bool), np.empty((R, N), dtype=bool)
-        changed = np.empty(R, dtype=bool)
-        for k in range(self.scene.contact.max_corrector_iterations + N + 1):  # holds-only solves end by N
-            q[..., :D][held & rods[:, None]] = hold_at[held & rods[:, None]]  # from the last solution, warm
-            solved = self._newton(q, q_old, q_pred, frames_old, kbar, state.time, dt, self._free_mask(held), rods)
-            for total, part in zip((converged, iterations, ratio, residual), solved, strict=True):
-                total[rods] = part[rods]
-            contact_changes(q[..., :D], q_old[..., :D], residual, held, starts, ends, radii, searched, self._no_shift,
-                            self._first_free_node, self._force_tolerance, adhesive, new_hold, hold_at, changed)
-            within_budget = k < self.scene.contact.max_corrector_iterations
-            if not corrector_continues(within_budget, new_hold, changed, rods):
-                break
-            update_holds(within_budget, held, adhesive, new_hold)
-            corrector[rods] += 1
-        return q, held, changed, corrector, converged, iterations, ratio, residual, (starts, ends)
-
-    def _solve_with_body(self, state, q, q_old, q_pred, frames_old, kbar, dt):
-        """Predictor–corrector contact with a free sphere (:func:`~.rigid_body.solve_with_body`, one compiled
-        loop): each solve moves rods and body together; new penetrations are held where they entered the body's
-        surface, with their offset in the body's frame, and adhesive holds are released, until nothing changes. Each
-        re-solve starts from the last solution, so Newton starts a few penetration depths from the new one;
-        restarting from the predictor would start a hold far from a body that the impact has slowed, a jump the 3-D
-        coupled solve did not always survive. Only the grippers whose contacts changed are solved again. ``q``
-        (R, N, S) holds Newton's start and receives the solution."""
-        disc = self.disc
-        R, N = self.n_rods, disc.n_nodes
-        held = state.held.reshape(R, N).copy()
-        offsets = state.hold_offset.reshape(R, N, 3).copy()
-        body_old = tuple(np.ascontiguousarray(x) for x in (state.body_position, state.body_velocity,
-                                                           state.body_orientation, state.body_angular_velocity))
-        c, theta = body_old[0] + dt * body_old[1], dt * body_old[3]  # the body's predictor
-        converged = np.empty(R, dtype=bool)
-        iterations = np.empty(R, dtype=np.int64)
-        ratio = np.empty(R)
-        residual = np.zeros((R, disc.n_dofs))
-        corrector = np.empty(R, dtype=np.int64)
-        changed = np.empty(R, dtype=bool)
-        mass_term, tolerance_inverse = self._per_step(dt)
-        water, rod_water = self._water(state.time)
-        held, orientation, starts, ends = solve_with_body(
-            q, q_old, q_pred, kbar, rod_water, dt, self._elastic, frames_old or self._no_frames, self._force_terms,
-            disc.band_width, mass_term, tolerance_inverse, self._clamp_free, held, offsets, self._projection,
-            *self._body.arrays(), c, theta, body_old, water, self._any_motion, disc.finger_directions,
-            self._plane_normals, self._body_tolerance, self.scene.newton.max_iterations,
-            self.scene.gripper.finger.length, self._first_free_node, self._force_tolerance,
-            self.scene.contact.max_corrector_iterations, converged, iterations, ratio, residual, corrector, changed)
-        return (q, held, changed, corrector, converged, iterations, ratio, residual, (starts, ends),
-                (offsets, c, (c - body_old[0]) / dt, orientation, theta / dt))
-
-    def _advance(self, state: RodState, kbar: np.ndarray, dt: float, velocity_old: np.ndarray,
-                 midpoint: bool = False) -> StepResult:
-        """A backward-Euler step of ``dt`` from ``state`` with the old velocity ``velocity_old`` (zero for a
-        pseudo-step); with ``midpoint``, the implicit midpoint rule's half step, extrapolated to the end of its step
-        of 2·``dt`` (:func:`~.assembly.midpoint_end`)."""
+    def implicit_step(self, state: RodState, natural_curvature: np.ndarray, dt: float, velocity_old: np.ndarray,
+                      midpoint: bool = False) -> StepResult:
+        """A backward-Euler step of ``dt`` [s] from ``state`` with κ̄ per rod (R,) and the old velocity
+        ``velocity_old`` (zero for a pseudo-step); with ``midpoint``, the implicit midpoint rule's half step,
+        extrapolated to the end of its step of 2·``dt`` (:func:`~.solvers.newton.midpoint_end`). The scene's
+        integrator composes its step from these (:mod:`.solvers.integrators`)."""
         disc = self.disc
         R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
         q_old, v_old = state.q.reshape(R, N, S), velocity_old.reshape(R, N, S)
@@ -512,27 +463,21 @@ class Simulator:
         q = np.empty((R, N, S))
         velocity, acceleration = np.empty(state.q.shape), np.empty(state.q.shape)
         frames_old = self._frames(state)
-        body = held = changed = corrector = None
+        rods = self._rod_arrays(frames_old)
+        solver = self._per_step(dt)
+        step = StepInputs(q_old, np.empty((R, N, S)), natural_curvature, self._water(state.time)[1], dt)
+        result = SolveResult(np.empty(R, dtype=bool), np.empty(R, dtype=np.int64), np.empty(R),
+                             np.empty((R, disc.n_dofs)), np.zeros(R, dtype=np.int64), np.zeros(R, dtype=bool))
+        held = body = None
         end_in_kernel = False
-        if self._body is None and self._object is None:  # rods on their own: the whole step in one kernel
-            mass_term, tolerance_inverse = self._per_step(dt)
+        if not self._has_object:  # rods on their own: the whole step in one kernel
             end_in_kernel = midpoint and frames_old is None  # 3-D frames are carried to the midpoint first
-            summary = advance_rods(q_old, v_old, acceleration_old, kbar, self._water(state.time)[1], dt,
-                                   self._elastic, frames_old or self._no_frames, self._force_terms, disc.band_width,
-                                   mass_term, tolerance_inverse, self._clamp_free, self.scene.newton.max_iterations,
-                                   end_in_kernel, self.n_fingers, q, velocity.reshape(R, N, S),
-                                   acceleration.reshape(R, N, S))
+            advance_rods(v_old, acceleration_old, step, rods, self._force_terms, solver, self._rods_alone,
+                         end_in_kernel, q, velocity.reshape(R, N, S), acceleration.reshape(R, N, S), result)
         else:
-            q_pred = np.empty((R, N, S))
-            predict(q_old, v_old, acceleration_old, dt, q_pred, q)
-            if self._body is not None:
-                q, held, changed, corrector, converged, iterations, ratio, residual, surface, body = \
-                    self._solve_with_body(state, q, q_old, q_pred, frames_old, kbar, dt)
-            else:
-                q, held, changed, corrector, converged, iterations, ratio, residual, surface = \
-                    self._solve_with_contact(state, q, q_old, q_pred, frames_old, kbar, dt)
+            predict(q_old, v_old, acceleration_old, dt, step.q_pred, q)
+            held, body = self._solve_with_contact(state, q, step, rods, solver, result)
             finish(q, q_old, v_old, dt, velocity.reshape(R, N, S), acceleration.reshape(R, N, S))
-            summary = per_gripper(converged, iterations, ratio, self.n_fingers)
         if midpoint and not end_in_kernel:
             if frames_old is not None:
                 frames_old = self._transported_frames(q, frames_old)  # to the midpoint, whence to the end
@@ -556,19 +501,49 @@ class Simulator:
         contact = None
         if held is not None:
             reaction = np.zeros((R, N, S))
-            reaction[..., :D] = residual.reshape(R, N, S)[..., :D] * held[..., None]
-            starts, ends = surface  # the object's segment as each rod sees it at the solution
+            reaction[..., :D] = result.residual.reshape(R, N, S)[..., :D] * held[..., None]
+            geometry = self._geometry  # the object as each rod sees it at the solution
             contact = ContactReport(
                 held=held.reshape(B, F, N),
                 reaction=disc.world_positions(reaction.reshape(B, F, N, S)),
-                normal_reaction=normal_reactions(q[..., :D], reaction[..., :D], starts, ends).reshape(B, F, N),
-                corrector_iterations=corrector.reshape(B, F).max(axis=1),
-                resolved=~changed.reshape(B, F).any(axis=1),
+                normal_reaction=normal_reactions(q[..., :D], reaction[..., :D], geometry.starts,
+                                                 geometry.ends).reshape(B, F, N),
+                corrector_iterations=result.corrector.reshape(B, F).max(axis=1),
+                resolved=~result.changed.reshape(B, F).any(axis=1),
                 palm_reaction=None if body is None else self._body.palm_reaction(
                     body[1], state.body_position, body[3], state.body_orientation, dt))
-        converged, iterations, ratio = summary
+        converged, iterations, ratio = per_gripper(result.converged, result.iterations, result.ratio, F)
         return record(StepResult, state=new_state, converged=converged, newton_iterations=iterations, residual=ratio,
                       contact=contact, substeps=np.full(B, 1))
+
+    def _solve_with_contact(self, state, q, step, rods, solver, result):
+        """The predictor–corrector (:func:`~.solvers.corrector.solve_with_contact`, one compiled loop) from Newton's
+        start ``q`` (R, N, S), which receives the solution. With a free body, each solve moves rods and body together
+        and a new hold keeps its offset in the body's frame; each re-solve starts from the last solution, so Newton
+        starts a few penetration depths from the new one (restarting from the predictor would start a hold far from
+        a body that the impact has slowed, a jump the 3-D coupled solve did not always survive). Returns the holds
+        (R, N) and, with a free body, its hold offsets and new state (else None)."""
+        R, N, D = self.n_rods, self.disc.n_nodes, self.disc.dim
+        held = state.held.reshape(R, N).copy() if state.held is not None else np.zeros((R, N), dtype=bool)
+        hold_at = step.q_old[..., :D].copy()  # nodes already held stay where they are
+        dt = step.dt
+        if self._body is None:
+            body, motion = self._still_body
+            holds = Holds(held, np.empty((0, 0, 3)), self._projection)
+        else:
+            old = BodyState(*(np.ascontiguousarray(x) for x in (state.body_position, state.body_velocity,
+                                                                state.body_orientation,
+                                                                state.body_angular_velocity)))
+            body = self._body.arrays()
+            motion = BodyMotion(True, old.position + dt * old.velocity, dt * old.angular_velocity,
+                                np.empty((self.batch_size, 3, 3)), old, self._water(state.time)[0])  # the predictor
+            holds = Holds(held, state.hold_offset.reshape(R, N, 3).copy(), self._projection)
+        solve_with_contact(q, step, rods, self._force_terms, solver, holds, hold_at, self._geometry, body, motion,
+                           result)
+        if self._body is None:
+            return held, None
+        c, theta = motion.position, motion.rotation
+        return held, (holds.offsets, c, (c - motion.old.position) / dt, motion.orientation, theta / dt)
 
 
 def _structure(scene: Scene) -> tuple:
@@ -577,26 +552,7 @@ def _structure(scene: Scene) -> tuple:
     obj = scene.grasped_object
     if obj is not None:
         obj = (type(obj), obj.free)
-    forces = tuple(replace(f, current=Current()) if isinstance(f, MorisonDrag) else f for f in scene.forces)
-    return replace(scene, grasped_object=None, forces=forces), obj
-
-
-def take_grippers(record, index: np.ndarray):
-    """The grippers ``index`` of a state or contact report (every array field has the batch axis first)."""
-    return evolve(record, **{name: value[index] for name, value in vars(record).items()
-                             if isinstance(value, np.ndarray)})
-
-
-def put_grippers(record, index: np.ndarray, part):
-    """A copy of ``record`` whose grippers ``index`` are taken from ``part``."""
-    return evolve(record, **{name: _set(value, index, getattr(part, name)) for name, value in vars(record).items()
-                             if isinstance(value, np.ndarray)})
-
-
-def _set(array: np.ndarray, index: np.ndarray, values: np.ndarray) -> np.ndarray:
-    out = array.copy()
-    out[index] = values
-    return out
+    return replace(scene, grasped_object=None, fluid=replace(scene.fluid, current=Current())), obj
 
 
 @dataclass(frozen=True, eq=False)

@@ -96,7 +96,7 @@ def run_script(*args, timeout=600):
 
 @pytest.mark.slow
 def test_record_video_example_writes_an_mp4(tmp_path):
-    out = run_script("examples/record_ramp_video.py", "--out", str(tmp_path), "--seed", "3")
+    out = run_script("-m", "examples.record_ramp_video", "--out", str(tmp_path), "--seed", "3")
     assert out.returncode == 0, out.stderr
     video = tmp_path / "ramp-episode-0.mp4"
     assert video.exists() and video.stat().st_size > 10_000
@@ -105,7 +105,7 @@ def test_record_video_example_writes_an_mp4(tmp_path):
 
 @pytest.mark.slow
 def test_env_speed_benchmark_writes_json_and_plot(tmp_path):
-    out = run_script("benchmarks/env_speed.py", "--json", str(tmp_path / "speed.json"), "--plot",
+    out = run_script("-m", "benchmarks.env_speed", "--json", str(tmp_path / "speed.json"), "--plot",
                      str(tmp_path / "speed.png"), "--repeats", "1", "--steps", "2")
     assert out.returncode == 0, out.stderr
     results = json.loads((tmp_path / "speed.json").read_text())
@@ -115,7 +115,7 @@ def test_env_speed_benchmark_writes_json_and_plot(tmp_path):
 
 
 def test_scripts_reject_bad_arguments(tmp_path):
-    out = run_script("agents/evaluate.py", "--policy", "ramp", "--episodes", "0")
+    out = run_script("-m", "agents.evaluate", "--policy", "ramp", "--episodes", "0")
     assert out.returncode == 2 and "--episodes = 0 must be at least 1" in out.stderr
-    out = run_script("agents/train_ppo.py", "--out", str(tmp_path), "--timesteps", "0")
+    out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path), "--timesteps", "0")
     assert out.returncode == 2 and "--timesteps = 0 must be at least 1" in out.stderr

@@ -5,6 +5,7 @@ import pickle
 import subprocess
 import sys
 import warnings
+from dataclasses import replace
 
 import gymnasium as gym
 import numpy as np
@@ -22,7 +23,6 @@ from soft_gripper_env.env import (
 )
 from soft_gripper_env.grasp_task import GraspTask
 from soft_gripper_env.physics import PAPER_BALL, paper_scene, run_ramp
-from soft_gripper_env.physics.config import replace
 
 ENV_ID = soft_gripper_env.ENV_ID
 

@@ -1,12 +1,18 @@
 """Bad configurations raise ValueError naming the field, its unit and the allowed range."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from soft_gripper_env.physics import (
     ELASTOSIL_MA_4601,
+    Buoyancy,
     FingerDesign,
+    Fluid,
+    Gravity,
     GripperDesign,
+    MassProportionalDamping,
     Material,
     NewtonSettings,
     Scene,
@@ -15,8 +21,6 @@ from soft_gripper_env.physics import (
     paper_finger,
     paper_scene,
 )
-from soft_gripper_env.physics.config import replace
-from soft_gripper_env.physics.forces import Buoyancy, Gravity, MassProportionalDamping
 
 
 @pytest.mark.parametrize("make, pattern", [
@@ -37,7 +41,8 @@ from soft_gripper_env.physics.forces import Buoyancy, Gravity, MassProportionalD
     (lambda: NewtonSettings(max_iterations=0), r"NewtonSettings\.max_iterations = 0"),
     (lambda: StokesDrag(viscosity=-1e-3), r"StokesDrag\.viscosity = -0\.001 Pa·s .*\[0, inf\)"),
     (lambda: Gravity(acceleration=float("inf")), r"Gravity\.acceleration = inf m/s²"),
-    (lambda: Buoyancy(fluid_density=-1.0), r"Buoyancy\.fluid_density = -1\.0 kg/m³"),
+    (lambda: Fluid(density=-1.0), r"Fluid\.density = -1\.0 kg/m³"),
+    (lambda: Buoyancy(acceleration=-1.0), r"Buoyancy\.acceleration = -1\.0 m/s²"),
     (lambda: MassProportionalDamping(rate="fast"), r"MassProportionalDamping\.rate = 'fast' is not a number"),
     (lambda: Simulator(paper_scene(), batch_size=0), r"Simulator\.batch_size = 0"),
     (lambda: StokesDrag(nodes=(2, -1)), r"StokesDrag\.nodes = \(2, -1\) must be None or non-negative"),
@@ -72,9 +77,8 @@ def test_configs_are_frozen_and_replaceable():
 def test_variable_stiffness_preset_matches_paper():
     finger = paper_finger(variable_stiffness=True)
     np.testing.assert_allclose(finger.node_radius, 0.001 * (20 - np.arange(20)))
-    from soft_gripper_env.physics import Discretization
 
-    disc = Discretization.from_scene(paper_scene(variable_stiffness=True))
+    disc = paper_scene(variable_stiffness=True).discretization()
     ei = disc.bend_stiffness
     assert ei[0] == pytest.approx(4.86e-2, rel=1e-3) and ei[-1] == pytest.approx(3.04e-7, rel=1e-2)
     assert ei[0] / ei[-1] == pytest.approx(1.6e5)

@@ -1,6 +1,7 @@
 """Contact with fixed objects (the paper's ball, a capsule): compression only, no penetration, bounded corrector."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -17,8 +18,7 @@ from soft_gripper_env.physics import (
     paper_scene,
     run_ramp,
 )
-from soft_gripper_env.physics.config import replace
-from soft_gripper_env.physics.contact import reachable
+from soft_gripper_env.physics.kernels.contact import reachable
 
 
 def segment_distance(points, start, end):

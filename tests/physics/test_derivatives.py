@@ -5,29 +5,30 @@ import numpy as np
 import pytest
 
 from soft_gripper_env.physics import (
-    Discretization,
+    WATER,
+    GripperDesign,
     MassProportionalDamping,
     Scene,
     StepContext,
     StokesDrag,
     cantilever_scene,
+    evaluate_force,
     paper_finger,
 )
-from soft_gripper_env.physics.config import GripperDesign
-from soft_gripper_env.physics.rod_3d import rod3d_elastic, rod3d_update_frames
-from soft_gripper_env.physics.rod_planar import planar_elastic
+from soft_gripper_env.physics.kernels.rod_3d import rod3d_elastic, rod3d_update_frames
+from soft_gripper_env.physics.kernels.rod_planar import planar_elastic
 
 
-def evaluate_force_model(model, disc, q, q_old, q_pred, dt):
+def evaluate_force_model(model, disc, q, q_old, q_pred, dt, fluid=WATER):
     """One force model's force (flat) and dense Newton-matrix contribution at coordinates q (1, N, S) of a
-    backward-Euler step of length dt from q_old with predictor q_pred."""
+    backward-Euler step of length dt from q_old with predictor q_pred, in ``fluid``."""
     D = disc.dim
     force = np.zeros(q.shape)
     band = np.zeros((1, disc.n_dofs, disc.band_width + 1))
     ctx = StepContext(time=0.3, start_positions=q_old[..., :D], velocity_derivative=1 / dt,
                       acceleration_derivative=1 / dt**2)
-    model.accumulate(disc, ctx, q[..., :D], (q - q_old)[..., :D] / dt, (q - q_pred)[..., :D] / dt**2,
-                     force[..., :D], band)
+    evaluate_force(model, disc, fluid, ctx, q[..., :D], (q - q_old)[..., :D] / dt, (q - q_pred)[..., :D] / dt**2,
+                   force[..., :D], band)
     return force.ravel(), band_to_dense(band[0])
 
 
@@ -167,7 +168,7 @@ def test_velocity_force_jacobian(model, force_model):
     """The Jacobian a force adds equals −d f/d q along v = (q − q_old)/Δt, by finite differences."""
     scene = Scene(GripperDesign(paper_finger(variable_stiffness=True), finger_angles=(0.0,)), forces=(force_model,),
                   model=model)
-    disc = Discretization.from_scene(scene)
+    disc = scene.discretization()
     rng = np.random.default_rng(3)
     N, S = disc.n_nodes, disc.stride
     dt = 0.01
@@ -184,7 +185,7 @@ def test_velocity_force_jacobian(model, force_model):
 
 
 def test_gravity_only_has_no_jacobian_and_pulls_down():
-    disc = Discretization.from_scene(cantilever_scene())
+    disc = cantilever_scene().discretization()
     q = disc.rest_q[:1]
     (model,) = cantilever_scene().forces
     force, band = evaluate_force_model(model, disc, q, q, q, 0.01)
@@ -195,7 +196,7 @@ def test_gravity_only_has_no_jacobian_and_pulls_down():
 
 @pytest.mark.parametrize("n, kd", [(12, 5), (40, 10)])
 def test_banded_solver_matches_dense_solve(n, kd):
-    from soft_gripper_env.physics.linalg import solve_banded_symmetric_rod
+    from soft_gripper_env.physics.kernels.linalg import solve_banded_symmetric_rod
 
     rng = np.random.default_rng(n)
     dense = np.zeros((n, n))

@@ -22,7 +22,7 @@ def run_script(*args, timeout=600):
 
 
 def test_reproduce_paper_writes_png_and_tip_csv(tmp_path):
-    stdout = run_script("examples/reproduce_paper.py", "--out", tmp_path, "--model", "planar", "--case", "fig5",
+    stdout = run_script("-m", "examples.reproduce_paper", "--out", tmp_path, "--model", "planar", "--case", "fig5",
                         "fig12")
     assert "[2/2] fig12" in stdout
     for name in ("fig5.png", "fig12.png", "fig12_soft_translucent.csv"):
@@ -39,7 +39,7 @@ def test_reproduce_paper_writes_png_and_tip_csv(tmp_path):
 
 
 def test_reproduce_paper_writes_contact_csv(tmp_path):
-    run_script("examples/reproduce_paper.py", "--out", tmp_path, "--model", "planar", "--case", "fig10")
+    run_script("-m", "examples.reproduce_paper", "--out", tmp_path, "--model", "planar", "--case", "fig10")
     with open(tmp_path / "fig10_contacts.csv") as handle:
         rows = list(csv.reader(handle))
     assert rows[0] == ["time_s", "finger", "node", "x_m", "y_m", "z_m", "fx_N", "fy_N", "fz_N", "fn_N"]
@@ -52,14 +52,14 @@ def test_reproduce_paper_writes_contact_csv(tmp_path):
 
 
 def test_reproduce_paper_rejects_unknown_case(tmp_path):
-    out = subprocess.run([sys.executable, "examples/reproduce_paper.py", "--out", str(tmp_path), "--case", "fig99"],
+    out = subprocess.run([sys.executable, "-m", "examples.reproduce_paper", "--out", str(tmp_path), "--case", "fig99"],
                          cwd=ROOT, capture_output=True, text=True)
     assert out.returncode == 2 and "invalid choice: 'fig99'" in out.stderr
 
 
 def test_cantilever_json(tmp_path):
     path = tmp_path / "c.json"
-    stdout = run_script("examples/cantilever.py", "--nodes", "20", "--clamp", "accurate", "--json", path)
+    stdout = run_script("-m", "examples.cantilever", "--nodes", "20", "--clamp", "accurate", "--json", path)
     result = json.loads(path.read_text())
     assert result["exact_tip_z_m"] == pytest.approx(-14.95e-3, abs=0.01e-3)
     assert abs(result["tip_z_m"] / result["exact_tip_z_m"] - 1) < 0.01
@@ -67,14 +67,14 @@ def test_cantilever_json(tmp_path):
 
 
 def test_cantilever_rejects_bad_node_count():
-    out = subprocess.run([sys.executable, "examples/cantilever.py", "--nodes", "3"], cwd=ROOT, capture_output=True,
+    out = subprocess.run([sys.executable, "-m", "examples.cantilever", "--nodes", "3"], cwd=ROOT, capture_output=True,
                          text=True)
     assert out.returncode == 2 and "FingerDesign.n_nodes = 3" in out.stderr
 
 
 @pytest.mark.slow
 def test_core_speed_benchmark_writes_json_and_plot(tmp_path):
-    stdout = run_script("benchmarks/core_speed.py", "--repeats", "1", "--json", tmp_path / "s.json", "--plot",
+    stdout = run_script("-m", "benchmarks.core_speed", "--repeats", "1", "--json", tmp_path / "s.json", "--plot",
                         tmp_path / "s.png")
     result = json.loads((tmp_path / "s.json").read_text())
     assert set(result) == {"seed_scene_planar_s", "seed_scene_3d_s", "batched_planar_us_per_gripper_step"}
@@ -85,7 +85,7 @@ def test_core_speed_benchmark_writes_json_and_plot(tmp_path):
 
 
 def test_water_vs_air_example(tmp_path):
-    stdout = run_script("examples/water_vs_air.py", "--out", tmp_path)
+    stdout = run_script("-m", "examples.water_vs_air", "--out", tmp_path)
     with open(tmp_path / "water_vs_air.csv") as handle:
         rows = list(csv.reader(handle))
     assert rows[0] == ["time_s", "tip_z_air_m", "tip_z_stokes_m", "tip_z_water_m"]
@@ -98,14 +98,14 @@ def test_water_vs_air_example(tmp_path):
 
 
 def test_water_vs_air_rejects_bad_time_step(tmp_path):
-    out = subprocess.run([sys.executable, "examples/water_vs_air.py", "--out", str(tmp_path), "--time-step", "-1"],
+    out = subprocess.run([sys.executable, "-m", "examples.water_vs_air", "--out", str(tmp_path), "--time-step", "-1"],
                          cwd=ROOT, capture_output=True, text=True)
     assert out.returncode == 2 and "Scene.time_step = -1.0 s" in out.stderr
 
 
 @pytest.mark.slow
 def test_medium_cost_benchmark(tmp_path):
-    stdout = run_script("benchmarks/medium_cost.py", "--repeats", "1", "--json", tmp_path / "m.json", "--plot",
+    stdout = run_script("-m", "benchmarks.medium_cost", "--repeats", "1", "--json", tmp_path / "m.json", "--plot",
                         tmp_path / "m.png")
     result = json.loads((tmp_path / "m.json").read_text())
     assert set(result) == {"planar_B1", "3d_B1", "planar_B64", "planar_vs_3d_max_distance_m"}
@@ -116,7 +116,7 @@ def test_medium_cost_benchmark(tmp_path):
 
 @pytest.mark.slow
 def test_speed_vs_error_quick(tmp_path):
-    stdout = run_script("benchmarks/speed_vs_error.py", "--out", tmp_path, "--quick", "--repeats", "1")
+    stdout = run_script("-m", "benchmarks.speed_vs_error", "--out", tmp_path, "--quick", "--repeats", "1")
     with open(tmp_path / "speed_vs_error.csv") as handle:
         rows = list(csv.DictReader(handle))
     assert list(rows[0]) == ["scene", "model", "integrator", "n_nodes", "dt_s", "wall_s_per_sim_s", "max_tip_error_m",

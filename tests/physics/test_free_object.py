@@ -1,6 +1,7 @@
 """A free sphere moved by gravity, buoyancy, drag, added mass and the fingers' reactions (implicit coupling)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -10,13 +11,14 @@ from soft_gripper_env.physics import (
     WATER_DENSITY,
     Capsule,
     Current,
+    Fluid,
     MorisonDrag,
     Simulator,
     Sphere,
     paper_scene,
 )
-from soft_gripper_env.physics.config import replace
-from soft_gripper_env.physics.rigid_body import SPHERE_DRAG_COEFFICIENT
+
+SPHERE_DRAG_COEFFICIENT = MorisonDrag().sphere_drag_coefficient
 
 
 def run(scene, steps, curvature=lambda t: 0.0, batch_size=1, unresolved_allowed=0):
@@ -143,7 +145,7 @@ def test_planar_fingers_in_two_planes_stop_a_spinning_sphere():
 
 
 def test_one_planar_finger_lets_a_sphere_turn_about_its_plane_normal_only():
-    from soft_gripper_env.physics.rigid_body import admissible_rotation, planar_body_basis
+    from soft_gripper_env.physics.kernels.body import admissible_rotation, planar_body_basis
 
     directions = Simulator(paper_scene("planar")).disc.finger_directions
     normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(3)], axis=1)  # of the vertical planes
@@ -174,9 +176,7 @@ def test_free_sphere_batch_members_are_independent():
 
 
 def water_scene(model, sphere, current):
-    forces = tuple(replace(f, current=current) if isinstance(f, MorisonDrag) else f
-                   for f in paper_scene(model, medium="water").forces)
-    return replace(paper_scene(model, medium="water", grasped_object=sphere), forces=forces)
+    return replace(paper_scene(model, medium="water", grasped_object=sphere), fluid=Fluid(current=current))
 
 
 @pytest.mark.parametrize("model", ["planar", "3d"])

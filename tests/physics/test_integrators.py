@@ -1,5 +1,6 @@
 """Integrators against a converged reference on the cantilever of physics.md §4, and adaptive substepping."""
 
+from dataclasses import replace
 from dataclasses import replace as replace_state
 
 import numpy as np
@@ -8,8 +9,7 @@ from scipy.linalg import eigh
 from test_derivatives import band_to_dense
 
 from soft_gripper_env.physics import NewtonSettings, Simulator, cantilever_scene, paper_scene
-from soft_gripper_env.physics.config import replace
-from soft_gripper_env.physics.integrators import INTEGRATORS
+from soft_gripper_env.physics.solvers.integrators import INTEGRATORS
 
 
 def tip_history(scene, integrator, dt, duration, sample_dt, initial_velocity=None):

@@ -69,8 +69,9 @@ def test_result_reports_convergence_and_residual():
 
 
 def test_nonconvergence_is_reported_not_raised():
+    from dataclasses import replace
+
     from soft_gripper_env.physics import NewtonSettings
-    from soft_gripper_env.physics.config import replace
 
     scene = replace(paper_scene(), newton=NewtonSettings(max_iterations=1, relative_tolerance=1e-12,
                                                         max_step_halvings=0))

@@ -1,5 +1,7 @@
 """Hard cases: each completes with no NaN and a documented outcome (docs/speed_vs_error.md, "Stability")."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -11,7 +13,6 @@ from soft_gripper_env.physics import (
     cantilever_scene,
     paper_scene,
 )
-from soft_gripper_env.physics.config import replace
 
 
 def run_ramp_checked(scene, rate=None, steps=None):

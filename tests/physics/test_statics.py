@@ -2,15 +2,15 @@
 (computed here, independently of the library, by shooting)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from examples.analytic import cantilever_elastica_tip
 from soft_gripper_env.physics import GripperDesign, NewtonSettings, Scene, Simulator, cantilever_scene, paper_finger
-from soft_gripper_env.physics.analytic import cantilever_elastica_tip
-from soft_gripper_env.physics.config import replace
 
 
 def settle(scene, natural_curvature=0.0):

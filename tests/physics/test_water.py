@@ -1,6 +1,7 @@
 """Water: buoyancy, Morison drag and added mass, each checked against a closed form or a symmetry."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,8 +12,8 @@ from soft_gripper_env.physics import (
     AddedMass,
     Buoyancy,
     Current,
-    Discretization,
     FingerDesign,
+    Fluid,
     Gravity,
     GripperDesign,
     Material,
@@ -22,11 +23,11 @@ from soft_gripper_env.physics import (
     Simulator,
     StepContext,
     cantilever_scene,
+    evaluate_force,
     paper_finger,
     paper_scene,
     run_ramp,
 )
-from soft_gripper_env.physics.config import replace
 
 CURRENT = Current(velocity=(0.05, -0.12, 0.03), oscillation=(0.02, 0.0, 0.01), period=0.7)
 
@@ -42,19 +43,19 @@ def random_state(disc, rng, scale=0.01):
 def test_morison_velocity_jacobian(model):
     """With the tangents held, the drag's Jacobian equals −∂f/∂v·∂v/∂q by finite differences."""
     scene = Scene(GripperDesign(paper_finger(), finger_angles=(0.4,)), forces=(), model=model)
-    disc = Discretization.from_scene(scene)
+    disc = scene.discretization()
     rng = np.random.default_rng(7)
     q_old = random_state(disc, rng)
     q = q_old + rng.normal(scale=3e-3, size=q_old.shape)  # velocities of order 0.3 m/s at Δt = 0.01 s
-    drag = MorisonDrag(current=CURRENT)
+    drag, fluid = MorisonDrag(), Fluid(current=CURRENT)
     D, dt = disc.dim, 0.01
 
     def force_at(q_new):
         force = np.zeros(q.shape)
         band = np.zeros((1, disc.n_dofs, disc.band_width + 1))
         ctx = StepContext(0.3, q_old[..., :D], 1 / dt, 1 / dt**2)
-        drag.accumulate(disc, ctx, q[..., :D], (q_new - q_old)[..., :D] / dt, np.zeros_like(q[..., :D]),
-                        force[..., :D], band)
+        evaluate_force(drag, disc, fluid, ctx, q[..., :D], (q_new - q_old)[..., :D] / dt,
+                       np.zeros_like(q[..., :D]), force[..., :D], band)
         return force.ravel(), band_to_dense(band[0])
 
     f0, jacobian = force_at(q)
@@ -66,7 +67,7 @@ def test_morison_velocity_jacobian(model):
 @pytest.mark.parametrize("model", ["planar", "3d"])
 def test_added_mass_jacobian(model):
     scene = Scene(GripperDesign(paper_finger(), finger_angles=(1.1,)), forces=(), model=model)
-    disc = Discretization.from_scene(scene)
+    disc = scene.discretization()
     rng = np.random.default_rng(8)
     q_old = random_state(disc, rng)
     q_pred = q_old + rng.normal(scale=1e-3, size=q_old.shape)
@@ -160,7 +161,8 @@ def test_added_mass_lowers_first_mode_frequency():
 
 def test_cross_current_pushes_finger_downstream():
     current = Current(velocity=(0.0, 0.3, 0.0))
-    scene = replace(paper_scene("3d"), forces=(Gravity(), Buoyancy(), MorisonDrag(current=current), AddedMass()))
+    scene = replace(paper_scene("3d"), forces=(Gravity(), Buoyancy(), MorisonDrag(), AddedMass()),
+                    fluid=Fluid(current=current))
     sim = Simulator(scene)
     state = sim.initial_state()
     for _ in range(60):
@@ -170,8 +172,7 @@ def test_cross_current_pushes_finger_downstream():
 
 
 def test_drag_reverses_with_relative_velocity_and_vanishes_with_the_water():
-    disc = Discretization.from_scene(replace(paper_scene("3d"), gripper=GripperDesign(paper_finger(),
-                                                                                       finger_angles=(0.3,))))
+    disc = replace(paper_scene("3d"), gripper=GripperDesign(paper_finger(), finger_angles=(0.3,))).discretization()
     q = disc.rest_q[:1]
     velocity = np.broadcast_to(np.array([0.1, -0.25, 0.2]), (1, disc.n_nodes, 3))
 
@@ -179,8 +180,8 @@ def test_drag_reverses_with_relative_velocity_and_vanishes_with_the_water():
         force = np.zeros(q.shape)
         band = np.zeros((1, disc.n_dofs, disc.band_width + 1))
         ctx = StepContext(0.0, q[..., :3], 100.0, 1e4)
-        MorisonDrag(current=Current(velocity=current_velocity)).accumulate(
-            disc, ctx, q[..., :3], node_velocity, np.zeros_like(node_velocity), force[..., :3], band)
+        evaluate_force(MorisonDrag(), disc, Fluid(current=Current(velocity=current_velocity)), ctx, q[..., :3],
+                       node_velocity, np.zeros_like(node_velocity), force[..., :3], band)
         return force
 
     still = np.zeros_like(velocity)
@@ -209,8 +210,9 @@ def test_water_medium_lists_only_fluid_forces_it_uses():
 
 @pytest.mark.parametrize("make, pattern", [
     (lambda: MorisonDrag(normal_coefficient=-1.0), r"MorisonDrag\.normal_coefficient = -1\.0"),
-    (lambda: MorisonDrag(current=(0, 1, 0)), r"MorisonDrag\.current must be a Current"),
-    (lambda: AddedMass(fluid_density=float("nan")), r"AddedMass\.fluid_density = nan kg/m³"),
+    (lambda: Fluid(current=(0, 1, 0)), r"Fluid\.current must be a Current"),
+    (lambda: Fluid(density=float("nan")), r"Fluid\.density = nan kg/m³"),
+    (lambda: AddedMass(sphere_coefficient=-0.5), r"AddedMass\.sphere_coefficient = -0\.5"),
     (lambda: Current(velocity=(0.0, 1.0)), r"Current\.velocity = \(0\.0, 1\.0\) must have 3 components"),
     (lambda: Current(period=0.0), r"Current\.period = 0\.0 s"),
     (lambda: Current(phase=float("nan")), r"Current\.phase = nan rad"),
@@ -224,7 +226,7 @@ def test_bad_water_parameters_raise(make, pattern):
 def test_current_phase_and_each_grippers_clock():
     current = Current(velocity=(0.1, 0.0, 0.0), oscillation=(0.0, 0.2, 0.0), period=2.0, phase=0.5)
     np.testing.assert_allclose(current.at(0.25), [0.1, 0.2 * math.sin(2 * math.pi * 0.125 + 0.5), 0.0], rtol=1e-15)
-    from soft_gripper_env.physics.hydrodynamics import CurrentBatch
+    from soft_gripper_env.physics.scene.fluid import CurrentBatch
 
     batch = CurrentBatch.of([current, current])
     batch.start_time[1] = 0.75  # gripper 1's episode began at batch time 0.75 s
@@ -248,7 +250,7 @@ def test_dissipative_forces_add_no_potential_energy(model):
     energy = sim.mechanical_energy(state, -0.4)
     np.testing.assert_allclose(energy, Simulator(conservative).mechanical_energy(state, -0.4), rtol=1e-12)
     weight_only = replace(water, forces=(Gravity(),))
-    buoyancy_only = replace(water, forces=(Buoyancy(WATER_DENSITY),))
+    buoyancy_only = replace(water, forces=(Buoyancy(),))
     elastic = Simulator(replace(water, forces=())).mechanical_energy(state, -0.4)
     gravity_part = Simulator(weight_only).mechanical_energy(state, -0.4) - elastic
     buoyancy_part = Simulator(buoyancy_only).mechanical_energy(state, -0.4) - elastic

@@ -8,7 +8,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .physics.simulator import Trajectory  # noqa: E402
+from soft_gripper_env.physics import Trajectory  # noqa: E402
 
 
 def plot_tip_height(ax, trajectory: Trajectory, label: str, finger: int = 0, **style) -> None:
@@ -43,7 +43,7 @@ def plot_timelapse(ax, trajectory: Trajectory, every: float = 0.1) -> None:
 
 
 def plot_sphere(ax, sphere, **style) -> None:
-    """A wireframe of a :class:`~.physics.contact.Sphere` on a 3-D axis."""
+    """A wireframe of a :class:`~soft_gripper_env.physics.Sphere` on a 3-D axis."""
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 25), np.linspace(0, np.pi, 13))
     c = sphere.center
     ax.plot_wireframe(c[0] + sphere.radius * np.cos(u) * np.sin(v), c[1] + sphere.radius * np.sin(u) * np.sin(v),

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import Scene
+from .design import GripperDesign
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,8 +86,10 @@ class Discretization:
         return out
 
     @classmethod
-    def from_scene(cls, scene: Scene) -> Discretization:
-        finger = scene.gripper.finger
+    def of(cls, gripper: GripperDesign, model: str, relative_tolerance: float) -> Discretization:
+        """The discretization of ``gripper``'s fingers in the rod ``model`` ("planar" or "3d"), with Newton's
+        tolerance unit ``relative_tolerance``·EI/L² per DOF (:class:`~.scene.NewtonSettings`)."""
+        finger = gripper.finger
         material = finger.material
         n = finger.n_nodes
         radius = finger.node_radius
@@ -98,7 +100,7 @@ class Discretization:
         area = math.pi * radius**2
         node_volume = area * voronoi
         node_mass = material.density * node_volume
-        planar = scene.model == "planar"
+        planar = model == "planar"
         stride, dim = (2, 2) if planar else (4, 3)
 
         dof_mass = np.zeros((n, stride))
@@ -113,9 +115,9 @@ class Discretization:
             free[-1, 3] = False  # θ_{N−1} does not exist
             residual_scale[:, 3] = finger.length  # moments [N·m] are compared with EI/L, forces with EI/L²
         bending_base = material.youngs_modulus * math.pi * radius[0] ** 4 / 4.0
-        residual_scale *= scene.newton.relative_tolerance * bending_base / finger.length**2
+        residual_scale *= relative_tolerance * bending_base / finger.length**2
 
-        angles = np.asarray(scene.gripper.finger_angles)
+        angles = np.asarray(gripper.finger_angles)
         directions = np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
         s = finger.node_arclength
         rest = np.zeros((len(angles), n, stride))
@@ -124,7 +126,7 @@ class Discretization:
         else:
             rest[:, :, :3] = s[None, :, None] * directions[:, None, :]
 
-        return cls(model=scene.model, n_nodes=n, stride=stride, dim=dim, vertical_axis=dim - 1,
+        return cls(model=model, n_nodes=n, stride=stride, dim=dim, vertical_axis=dim - 1,
                    node_radius=radius, node_mass=node_mass, node_volume=node_volume,
                    rest_edge_length=np.full(n - 1, dl),
                    stretch_stiffness=material.youngs_modulus * math.pi * edge_radius**2,

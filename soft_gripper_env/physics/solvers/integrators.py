@@ -30,32 +30,22 @@ periods at Δt = 1e-2 s is a quarter of the oscillation.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, TypeVar
+from typing import Protocol
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from .simulator import RodState, Simulator, StepResult
+from ..scene.scene import INTEGRATOR_NAMES
+from .records import RodState, StepResult, evolve
 
 
-Record = TypeVar("Record")
+class ImplicitStepper(Protocol):
+    """What an integrator steps with: one implicit (backward-Euler) step of any length (the simulator's
+    :meth:`~..simulator.Simulator.implicit_step`)."""
 
-
-def evolve(record: Record, **changes) -> Record:
-    """A copy of one of the step's frozen records (:class:`~.simulator.RodState`, :class:`~.simulator.StepResult`,
-    :class:`~.contact.ContactReport`) with ``changes``: ``dataclasses.replace`` without its per-call field
-    introspection and ``__init__``, which cost more than a small scene's whole step. The records hold arrays
-    only, so there is nothing to validate."""
-    copy = object.__new__(type(record))
-    vars(copy).update(vars(record), **changes)
-    return copy
-
-
-def record(kind: type[Record], **fields) -> Record:
-    """A new record of ``kind`` with every one of its ``fields`` given, made as :func:`evolve` makes a copy."""
-    made = object.__new__(kind)
-    vars(made).update(fields)
-    return made
+    def implicit_step(self, state: RodState, natural_curvature: np.ndarray, dt: float, velocity_old: np.ndarray,
+                      midpoint: bool = False) -> StepResult:
+        """A backward-Euler step of ``dt`` [s] from ``state`` with κ̄ per rod and the old velocity ``velocity_old``;
+        with ``midpoint``, the implicit midpoint rule's half step, extrapolated to the end of its step of 2·dt."""
 
 
 class BackwardEuler:
@@ -63,8 +53,9 @@ class BackwardEuler:
 
     order = 1
 
-    def advance(self, sim: Simulator, state: RodState, kbar: np.ndarray, dt: float) -> StepResult:
-        return sim._advance(state, kbar, dt, state.velocity)
+    def advance(self, stepper: ImplicitStepper, state: RodState, natural_curvature: np.ndarray,
+                dt: float) -> StepResult:
+        return stepper.implicit_step(state, natural_curvature, dt, state.velocity)
 
 
 class ImplicitMidpoint:
@@ -72,8 +63,9 @@ class ImplicitMidpoint:
 
     order = 2
 
-    def advance(self, sim: Simulator, state: RodState, kbar: np.ndarray, dt: float) -> StepResult:
-        return sim._advance(state, kbar, 0.5 * dt, state.velocity, midpoint=True)
+    def advance(self, stepper: ImplicitStepper, state: RodState, natural_curvature: np.ndarray,
+                dt: float) -> StepResult:
+        return stepper.implicit_step(state, natural_curvature, 0.5 * dt, state.velocity, midpoint=True)
 
 
 class MidpointComposition:
@@ -82,11 +74,12 @@ class MidpointComposition:
     def __init__(self, fractions: tuple[float, ...], order: int) -> None:
         self.fractions, self.order = fractions, order
 
-    def advance(self, sim: Simulator, state: RodState, kbar: np.ndarray, dt: float) -> StepResult:
+    def advance(self, stepper: ImplicitStepper, state: RodState, natural_curvature: np.ndarray,
+                dt: float) -> StepResult:
         results = []
         current = state
         for fraction in self.fractions:
-            results.append(MIDPOINT.advance(sim, current, kbar, fraction * dt))
+            results.append(MIDPOINT.advance(stepper, current, natural_curvature, fraction * dt))
             current = results[-1].state
         end = evolve(current, time=state.time + dt, acceleration=(current.velocity - state.velocity) / dt)
         return evolve(results[-1], state=end, converged=np.logical_and.reduce([r.converged for r in results]),
@@ -102,4 +95,5 @@ INTEGRATORS = {"backward_euler": BackwardEuler(), "implicit_midpoint": MIDPOINT,
                "midpoint_triple_jump": MidpointComposition((_YOSHIDA, 1.0 - 2.0 * _YOSHIDA, _YOSHIDA), order=4),
                "midpoint_suzuki": MidpointComposition((_SUZUKI, _SUZUKI, 1.0 - 4.0 * _SUZUKI, _SUZUKI, _SUZUKI),
                                                       order=4)}
-"""Every integrator, by the name a :class:`~.config.Scene` gives in ``integrator``."""
+"""Every integrator, by the name a :class:`~..scene.scene.Scene` gives in ``integrator``."""
+assert tuple(INTEGRATORS) == INTEGRATOR_NAMES, "the scene's integrator names and the integrators differ"

@@ -16,7 +16,7 @@ l_i      Voronoi (rest) length of node i                                  m
 κ̄        natural curvature, the same at every interior node of a rod      1
 =======  ===============================================================  ==========
 
-E_stretch = ½·EA·l̄·(|e|/l̄ − 1)² per edge, E_bend = EI/(2·l_i)·(κ_i − κ̄)² per interior node (physics.md §1).
+E_stretch = ½·EA·l̄·(|e|/l̄ − 1)² per edge, E_bend = EI/(2·l_i)·(κ_i − κ̄)² per interior node (``docs/design.md``).
 φ = θ(f) − θ(e) with θ(e) = atan2(e_z, e_s), whose derivatives are closed-form, so the Hessian is exact.
 Forces (−∇E) and the lower band of ∇²E are *accumulated* into the caller's arrays.
 """
@@ -159,10 +159,3 @@ def planar_elastic(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_le
                                        natural_curvature[r], force[r], band[r], accumulate_hessian)
     return energy
 
-
-def turning_angles(q: np.ndarray) -> np.ndarray:
-    """Signed turning angle φ_i [rad] at the interior nodes, (..., N − 2), from planar coordinates (..., N, 2)."""
-    e = np.diff(q, axis=-2)
-    cross = e[..., :-1, 0] * e[..., 1:, 1] - e[..., :-1, 1] * e[..., 1:, 0]
-    dot = np.einsum("...k,...k->...", e[..., :-1, :], e[..., 1:, :])
-    return np.arctan2(cross, dot)

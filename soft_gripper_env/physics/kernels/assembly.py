@@ -1,0 +1,175 @@
+"""The compiled assembly of one rod's implicit system: its elastic forces and the scene's force terms, with
+−∂f/∂q, for a backward-Euler step of Δt from q_old with the predictor q_pred = q_old + Δt·v_old.
+
+The arguments shared by these kernels:
+
+=====================  ===========================================================================  ===========
+name                   meaning                                                                      shape
+=====================  ===========================================================================  ===========
+``q``                  coordinates (positions [m], twist angles [rad])                              (R, N, S)
+``natural_curvature``  κ̄ per rod (dimensionless)                                                    (R,)
+``water``              the water's velocity at every rod, in its coordinates [m/s]                  (R, D)
+``rods``               :class:`RodArrays`: the rod's constants and the start-of-step frames         bundle
+``terms``              :class:`~..scene.forces.ForceTerms`, as :class:`TermArrays`                  bundle
+=====================  ===========================================================================  ===========
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ..scene.discretization import Discretization
+from ..scene.fluid import Fluid
+from ..scene.forces import ForceModel, ForceTerms
+from .forces import added_mass, linear_damping, morison_drag, rod_water_velocity
+from .rod_3d import rod3d_elastic_rod
+from .rod_planar import planar_elastic_rod
+
+
+class RodArrays(NamedTuple):
+    """What every kernel needs to know of the rods besides their coordinates: the finger design's constants
+    (:class:`~..scene.discretization.Discretization`, per node or edge of one rod) and, in 3-D, every rod's reference
+    frames at the start of the step (empty arrays in the planar model)."""
+
+    rest_length: np.ndarray
+    """Rest length of each edge [m], (N − 1,)."""
+    stretch_stiffness: np.ndarray
+    """EA of each edge [N], (N − 1,)."""
+    bend_stiffness: np.ndarray
+    """EI at each node [N·m²], (N,)."""
+    twist_stiffness: np.ndarray
+    """GJ at each node [N·m²], (N,)."""
+    voronoi_length: np.ndarray
+    """Rest length attributed to each node [m], (N,)."""
+    tangent: np.ndarray
+    """Start-of-step unit tangent of every edge, (R, N − 1, 3); (0, 0, 3) in the planar model."""
+    director: np.ndarray
+    """Start-of-step first director of every edge, (R, N − 1, 3); (0, 0, 3) in the planar model."""
+    reference_twist: np.ndarray
+    """Start-of-step reference twist at every node [rad], (R, N); (0, 0) in the planar model."""
+
+    @classmethod
+    def of(cls, disc: Discretization, frames=None) -> RodArrays:
+        """The arrays of ``disc`` with the 3-D ``frames`` (tangent, director, reference twist), or none."""
+        if frames is None:
+            frames = (np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))
+        return cls(disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness, disc.twist_stiffness,
+                   disc.voronoi_length, *frames)
+
+
+class StepInputs(NamedTuple):
+    """What a backward-Euler step of every rod starts from (arrays over all rods R)."""
+
+    q_old: np.ndarray
+    """Coordinates at the start of the step, (R, N, S) [m, rad]."""
+    q_pred: np.ndarray
+    """The predictor q_old + Δt·v_old, (R, N, S) [m, rad]."""
+    natural_curvature: np.ndarray
+    """κ̄ of every rod, (R,) (dimensionless)."""
+    water: np.ndarray
+    """The water's velocity at every rod, in its coordinates, (R, D) [m/s]."""
+    dt: float
+    """Δt [s]."""
+
+
+@njit(cache=True, error_model="numpy")
+def external_forces_rod(positions, start_positions, velocities, accelerations, water, terms, velocity_derivative,
+                        acceleration_derivative, stride, force, band):
+    """Adds the force terms' force [N] to one rod's ``force`` (N, ≥D) and their negated Jacobian to its ``band``.
+    ``positions``, ``start_positions``, ``velocities``, ``accelerations``: (N, D); ``water`` (D,)."""
+    node_force, damping, drag_normal, drag_tangential, edge_added_mass = terms
+    n_nodes, dim = positions.shape
+    if node_force.size:
+        for i in range(n_nodes):
+            for k in range(dim):
+                force[i, k] += node_force[i, k]
+    if damping.size:
+        linear_damping(damping, velocities, velocity_derivative, stride, force, band)
+    if drag_normal.size:
+        morison_drag(positions, velocities, water, drag_normal, drag_tangential, velocity_derivative, stride, force,
+                     band)
+    if edge_added_mass.size:
+        added_mass(start_positions, accelerations, edge_added_mass, acceleration_derivative, stride, force, band)
+
+
+@njit(cache=True, error_model="numpy")
+def external_forces(positions, start_positions, velocities, accelerations, water, terms, velocity_derivative,
+                    acceleration_derivative, stride, force, band):
+    """:func:`external_forces_rod` for every rod: arrays (R, N, D), ``water`` (R, D), ``band`` (R, n, kd+1)."""
+    for r in range(positions.shape[0]):
+        external_forces_rod(positions[r], start_positions[r], velocities[r], accelerations[r], water[r], terms,
+                            velocity_derivative, acceleration_derivative, stride, force[r], band[r])
+
+
+@njit(cache=True, error_model="numpy")
+def assemble_rod(r, q, step, rods, terms, hessian, force, band, velocity, acceleration):
+    """Overwrites ``force`` (N, S) with rod r's total force [N] at coordinates ``q`` (R, N, S) of the backward-Euler
+    step ``step`` (:class:`StepInputs`), and ``band`` (n, kd+1) with −∂f/∂q (when ``hessian``); ``velocity`` and
+    ``acceleration`` (N, D) are scratch. ``rods`` is :class:`RodArrays`, ``terms`` the scene's
+    :class:`~..scene.forces.ForceTerms`. Returns its elastic energy [J]."""
+    force[:] = 0.0
+    band[:] = 0.0
+    stride = q.shape[2]
+    if stride == 2:
+        energy = planar_elastic_rod(q[r], rods.rest_length, rods.stretch_stiffness, rods.bend_stiffness,
+                                    rods.voronoi_length, step.natural_curvature[r], force, band, hessian)
+    else:
+        energy = rod3d_elastic_rod(q[r], rods.tangent[r], rods.director[r], rods.reference_twist[r],
+                                   rods.rest_length, rods.stretch_stiffness, rods.bend_stiffness,
+                                   rods.twist_stiffness, rods.voronoi_length, step.natural_curvature[r], force,
+                                   band, hessian)
+    n_nodes, dim = velocity.shape
+    dt = step.dt
+    for i in range(n_nodes):
+        for k in range(dim):
+            velocity[i, k] = (q[r, i, k] - step.q_old[r, i, k]) / dt
+            acceleration[i, k] = (q[r, i, k] - step.q_pred[r, i, k]) / (dt * dt)
+    external_forces_rod(q[r, :, :dim], step.q_old[r, :, :dim], velocity, acceleration, step.water[r], terms,
+                        1.0 / dt, 1.0 / (dt * dt), stride, force, band)
+    return energy
+
+
+@njit(cache=True, error_model="numpy")
+def assemble(q, step, rods, terms, hessian, force, band):
+    """Every rod's force (R, N, S) [N] and −∂f/∂q (R, n, kd+1), written into ``force`` and ``band``."""
+    dim = step.water.shape[1]
+    velocity = np.empty((q.shape[1], dim))
+    acceleration = np.empty((q.shape[1], dim))
+    for r in range(q.shape[0]):
+        assemble_rod(r, q, step, rods, terms, hessian, force[r], band[r], velocity, acceleration)
+
+
+@dataclass(frozen=True, eq=False)
+class StepContext:
+    """What the integrator tells a force model evaluated on its own (:func:`evaluate_force`) about the step."""
+
+    time: float
+    """Time at the start of the step [s]."""
+    start_positions: np.ndarray
+    """Node positions at the start of the step [m], (R, N, D)."""
+    velocity_derivative: float
+    """∂v/∂q of the integrator [1/s]."""
+    acceleration_derivative: float
+    """∂a/∂q of the integrator [1/s²]."""
+
+
+def evaluate_force(model: ForceModel, disc: Discretization, fluid: Fluid, ctx: StepContext, positions: np.ndarray,
+                   velocities: np.ndarray, accelerations: np.ndarray, force: np.ndarray,
+                   system_band: np.ndarray) -> None:
+    """Adds one force ``model``'s force [N] to ``force`` and its negated Jacobian
+    −(∂f/∂q + ∂f/∂v·∂v/∂q + ∂f/∂a·∂a/∂q) to ``system_band``, through the kernel the simulator runs, in ``fluid``
+    whose current is evaluated at ``ctx.time``. Arrays (R, N, D) [m, m/s, m/s², N] as in
+    :class:`~..scene.discretization.Discretization`, ``system_band`` (R, n, kd+1)."""
+    n_grippers = positions.shape[0] // len(disc.finger_directions)
+    water = rod_water_velocity(disc, np.tile(fluid.current.at(ctx.time), (n_grippers, 1)))
+    external_forces(positions, ctx.start_positions, velocities, accelerations, water,
+                    ForceTerms.of(disc, (model,), fluid), ctx.velocity_derivative, ctx.acceleration_derivative,
+                    disc.stride, force, system_band)
+
+
+__all__ = ["RodArrays", "StepInputs", "external_forces_rod", "external_forces", "assemble_rod", "assemble",
+           "StepContext", "evaluate_force"]

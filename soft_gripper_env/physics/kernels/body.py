@@ -1,0 +1,310 @@
+"""Compiled kernels of a free rigid body (sphere or capsule) moved by the fingers' contact reactions.
+
+Notation (per gripper):
+
+========  ================================================================  ==========
+symbol    meaning                                                           unit
+========  ================================================================  ==========
+c, u      centre and velocity of the body                                   m, m/s
+R, ω      orientation (body → world) and angular velocity                   1, rad/s
+θ         rotation over the step: R = exp([θ]×)·R_old, ω = θ/Δt            rad
+r_h       a held node's offset from the centre, in the body frame           m
+a_h       the same offset in the world frame, R·r_h                         m
+M_t       mass plus added mass, m + C_a·ρ_w·V                               kg
+I         rotational inertia (⅖·m·R² for a sphere), world frame R·I_b·Rᵀ  kg·m²
+========  ================================================================  ==========
+
+Backward Euler for the body, M_t·(c − c_old − Δt·u_old)/Δt² = F_ext(u) − Σ_h R_h and
+(I·ω − I_old·ω_old)/Δt = −Σ_h a_h × R_h, where R_h is the reaction of the body on held node h (the node's residual)
+and held nodes move with the body, x_h = c + a_h. Rods and body are solved together by Newton's method: the rods'
+free DOFs are eliminated rod by rod (one banded factorisation, seven right-hand sides), which leaves a 6×6 system
+for the body per gripper (a Schur complement). A staggered scheme, which would move the body with last iteration's
+reactions, is unstable for a body as light as the water it displaces; this one is not.
+
+The palm, a disc in the plane z = 0, pushes back on a body that overlaps it, with a stiffness and critical damping
+(:attr:`~..scene.objects.ContactSettings.palm_stiffness`; the overlap's dependence on the horizontal position and the
+orientation is left out of the Newton matrix). External loads come from the scene's force models through
+:class:`~..scene.forces.BodyLoads`: gravity, buoyancy, and with Morison drag quadratic drag on the velocity relative
+to the current: ½·ρ_w·C_d·π·r²·|w|·w for a sphere (C_d = 0.47, Re ≈ 10³–10⁵) or a capsule's two end caps, plus
+½·ρ_w·C_n·D·h·|w_n|·w_n across a capsule's cylinder; with added mass, C_a = 0.5 of a sphere's volume, and
+C_a·ρ_w·π·r²·h across a capsule's cylinder. The water's torque on a turning body is neglected.
+
+These are the body's kernels; Newton's method on rods and body together is :func:`~..solvers.newton.newton`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+
+class BodyArrays(NamedTuple):
+    """The grasped objects of a batch of B grippers, one each, as the kernels take them (body frame = world at
+    t = 0), and the palm they may be pushed against."""
+
+    mass: np.ndarray
+    """m [kg], (B,)."""
+    inertia: np.ndarray
+    """Rotational inertia about the centre, body frame [kg·m²], (B, 3, 3)."""
+    added_mass: np.ndarray
+    """Added-mass tensor, body frame [kg], (B, 3, 3)."""
+    weight: np.ndarray
+    """Net weight along −z, (m − ρ_w·V)·g [N], (B,)."""
+    normal_drag: np.ndarray
+    """½·ρ_w·C_n·D·h of a capsule's cylinder, on the velocity normal to its axis [kg/m], (B,); 0 for a sphere."""
+    isotropic_drag: np.ndarray
+    """½·ρ_w·C_d·π·r² of the sphere (or a capsule's two end caps together) [kg/m], (B,)."""
+    axis: np.ndarray
+    """The capsule's axis in the body frame, (B, 3); any unit vector for a sphere."""
+    segment_start: np.ndarray
+    """One end of the object's segment relative to its centre, body frame [m], (B, 3) (zero for a sphere)."""
+    segment_end: np.ndarray
+    """The other end [m], (B, 3)."""
+    radius: np.ndarray
+    """Radius of each body [m], (B,)."""
+    palm_stiffness: float
+    """k of the palm disc in the plane z = 0 [N/m]."""
+    palm_radius: float
+    """Its radius [m]."""
+
+
+class BodyState(NamedTuple):
+    """The bodies' state at one instant (the start of a step)."""
+
+    position: np.ndarray
+    """Centre [m], (B, 3)."""
+    velocity: np.ndarray
+    """Velocity [m/s], (B, 3)."""
+    orientation: np.ndarray
+    """Orientation, body to world, (B, 3, 3)."""
+    angular_velocity: np.ndarray
+    """Angular velocity [rad/s], (B, 3)."""
+
+
+@njit(cache=True, error_model="numpy")
+def _translational_mass(b, body, orientation_old, mass):
+    """Mass plus added mass of body b in the world frame, m·I + R_old·A·R_oldᵀ [kg], into ``mass`` (3, 3)."""
+    added = body.added_mass
+    for i in range(3):
+        for j in range(3):
+            total = body.mass[b] if i == j else 0.0
+            for k in range(3):
+                for m in range(3):
+                    total += orientation_old[b, i, k] * added[b, k, m] * orientation_old[b, j, m]
+            mass[i, j] = total
+
+
+@njit(cache=True, error_model="numpy")
+def _palm_push(b, body, c, vertical_velocity, orientation, vertical_mass, dt):
+    """The palm's push down on body b [N], k·overlap + critical damping 2·√(k·M)·v_z where the body rises above
+    the disc (its highest end sphere counts), and the push's derivative by the body's height over the step [N/m].
+    ``orientation`` (3, 3)."""
+    stiffness, palm_radius = body.palm_stiffness, body.palm_radius
+    if stiffness == 0.0:
+        return 0.0, 0.0
+    radius = body.radius[b]
+    top_end = np.empty(3)
+    highest = -np.inf
+    for segment in (body.segment_start, body.segment_end):
+        end = np.empty(3)
+        for i in range(3):
+            end[i] = c[b, i] + orientation[i, 0] * segment[b, 0] + orientation[i, 1] * segment[b, 1] \
+                + orientation[i, 2] * segment[b, 2]
+        if end[2] > highest:
+            highest = end[2]
+            top_end[:] = end
+    outside = max(math.hypot(top_end[0], top_end[1]) - palm_radius, 0.0)  # past the disc's rim
+    top = top_end[2] + math.sqrt(max(radius * radius - outside * outside, 0.0))
+    if not (top > 0.0 and outside < radius):
+        return 0.0, 0.0
+    damping = 2.0 * math.sqrt(stiffness * vertical_mass)
+    return stiffness * top + damping * vertical_velocity, stiffness + damping / dt
+
+
+@njit(cache=True, error_model="numpy")
+def palm_reactions(body, c, c_old, orientation, orientation_old, dt, reaction):
+    """Writes the force of every body on the palm (B, 3) [N] into ``reaction``."""
+    mass = np.empty((3, 3))
+    for b in range(c.shape[0]):
+        _translational_mass(b, body, orientation_old, mass)
+        reaction[b, 2] = _palm_push(b, body, c, (c[b, 2] - c_old[b, 2]) / dt, orientation[b], mass[2, 2],
+                                    dt)[0]
+
+
+@njit(cache=True, error_model="numpy")
+def body_residual(b, body, c, theta, body_old, orientation, dt, water, residual, matrix):
+    """Body b's own residual (6,) (inertia minus external loads) into ``residual``, and the diagonal blocks of its
+    Jacobian, translation and rotation, into ``matrix`` (6, 6). ``body`` is :class:`BodyArrays`, ``body_old`` a
+    :class:`BodyState`; ``orientation`` (3, 3) is the end-of-step R; ``water`` (B, 3) the current at each body [m/s]."""
+    c_old, u_old, orientation_old, w_old = body_old
+    inertia, weight, normal_drag, isotropic_drag, axis_body = body.inertia, body.weight, body.normal_drag, \
+        body.isotropic_drag, body.axis
+    mass = np.empty((3, 3))
+    _translational_mass(b, body, orientation_old, mass)  # with the start-of-step orientation, as the rods' added mass
+    u = np.empty(3)
+    w = np.empty(3)
+    axis = np.empty(3)
+    part = np.empty(3)
+    force = np.zeros(3)
+    force[2] = -weight[b]
+    matrix[:, :] = 0.0
+    for i in range(3):
+        u[i] = (c[b, i] - c_old[b, i]) / dt
+        w[i] = u[i] - water[b, i]
+        axis[i] = orientation[i, 0] * axis_body[b, 0] + orientation[i, 1] * axis_body[b, 1] \
+            + orientation[i, 2] * axis_body[b, 2]
+        for j in range(3):
+            matrix[i, j] = mass[i, j] / (dt * dt)
+    along = w[0] * axis[0] + w[1] * axis[1] + w[2] * axis[2]
+    for normal_only in (False, True):
+        coefficient = normal_drag[b] if normal_only else isotropic_drag[b]
+        if coefficient == 0.0:
+            continue
+        for i in range(3):
+            part[i] = w[i] - along * axis[i] if normal_only else w[i]
+        speed = math.sqrt(part[0] ** 2 + part[1] ** 2 + part[2] ** 2)
+        safe = speed if speed > 0.0 else 1.0
+        for i in range(3):
+            force[i] -= coefficient * speed * part[i]
+            for j in range(3):
+                projector = (1.0 if i == j else 0.0) - (axis[i] * axis[j] if normal_only else 0.0)
+                matrix[i, j] += coefficient / dt * (speed * projector + part[i] * part[j] / safe)
+    push, stiffness = _palm_push(b, body, c, u[2], orientation, mass[2, 2], dt)
+    force[2] -= push
+    matrix[2, 2] += stiffness
+    for i in range(3):
+        total = -force[i]
+        for j in range(3):
+            total += mass[i, j] * (c[b, j] - c_old[b, j] - dt * u_old[b, j]) / (dt * dt)
+        residual[i] = total
+    # (I·ω − I_old·ω_old)/Δt with I = R·I_b·Rᵀ
+    for i in range(3):
+        momentum = 0.0
+        for j in range(3):
+            new = 0.0
+            old = 0.0
+            for k in range(3):
+                for m in range(3):
+                    new += orientation[i, k] * inertia[b, k, m] * orientation[j, m]
+                    old += orientation_old[b, i, k] * inertia[b, k, m] * orientation_old[b, j, m]
+            momentum += new * theta[b, j] / dt - old * w_old[b, j]
+            matrix[3 + i, 3 + j] = new / (dt * dt)
+        residual[3 + i] = momentum / dt
+
+
+@njit(cache=True, error_model="numpy")
+def _rotation_exp(theta, out):
+    """exp([θ]×) of one rotation vector (3,) [rad] into ``out`` (3, 3), by Rodrigues' formula."""
+    angle = math.sqrt(theta[0] ** 2 + theta[1] ** 2 + theta[2] ** 2)
+    if angle < 1e-8:
+        a = 1.0 - angle**2 / 6.0
+        b = 0.5 - angle**2 / 24.0
+    else:
+        a = math.sin(angle) / angle
+        b = (1.0 - math.cos(angle)) / angle**2
+    k = np.zeros((3, 3))
+    k[0, 1], k[0, 2], k[1, 2] = -theta[2], theta[1], -theta[0]
+    k[1, 0], k[2, 0], k[2, 1] = theta[2], -theta[1], theta[0]
+    for i in range(3):
+        for j in range(3):
+            kk = k[i, 0] * k[0, j] + k[i, 1] * k[1, j] + k[i, 2] * k[2, j]
+            out[i, j] = (1.0 if i == j else 0.0) + a * k[i, j] + b * kk
+
+
+@njit(cache=True, error_model="numpy")
+def turned(theta, orientation_old, rotation, out):
+    """The body's orientation after turning by ``theta`` (3,) [rad] over the step, exp([θ]×)·R_old, into ``out``
+    (3, 3); ``rotation`` (3, 3) is scratch."""
+    _rotation_exp(theta, rotation)
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = rotation[i, 0] * orientation_old[0, j] + rotation[i, 1] * orientation_old[1, j] \
+                + rotation[i, 2] * orientation_old[2, j]
+
+
+@njit(cache=True, error_model="numpy")
+def admissible_rotation(basis, theta):
+    """Projects one gripper's rotation over the step ``theta`` (3,) [rad], in place, onto the rotations its
+    ``basis`` (6, 6; orthonormal columns) allows. Newton moves the body only along the basis, so a rotation it
+    forbids would otherwise keep the predictor's Δt·ω_old step after step: a body that spun before planar fingers
+    in two planes caught it would turn on at that rate for ever, carrying its holds (and the fingertips on them)
+    around with it. Locking the rotation is the same inelastic impact that stick contact is for translation."""
+    projected = np.zeros(3)
+    for k in range(6):
+        along = 0.0
+        for i in range(3):
+            along += basis[3 + i, k] * theta[i]
+        for i in range(3):
+            projected[i] += along * basis[3 + i, k]
+    theta[:] = projected
+
+
+@njit(cache=True, error_model="numpy")
+def planar_body_basis(held, plane_normals):
+    """The motions a free body held by planar fingers may make, (B, 6, 6), padded with zero columns: any
+    translation; any rotation while no finger touches; while every touching finger's plane has the same normal,
+    rotation about it; else none (a rotation about another axis would carry held points out of a plane the finger
+    cannot leave). ``held`` (R, N) marks held nodes, ``plane_normals`` (F, 3) the fingers' planes."""
+    n_fingers = plane_normals.shape[0]
+    n_grippers = held.shape[0] // n_fingers
+    basis = np.zeros((n_grippers, 6, 6))
+    for b in range(n_grippers):
+        for k in range(3):
+            basis[b, k, k] = 1.0
+        first = -1
+        parallel = True
+        for f in range(n_fingers):
+            if not held[b * n_fingers + f].any():
+                continue
+            if first < 0:
+                first = f
+            else:
+                dot = 0.0
+                for k in range(3):
+                    dot += plane_normals[first, k] * plane_normals[f, k]
+                parallel &= abs(abs(dot) - 1.0) < 1e-9
+        if first < 0:
+            for k in range(3, 6):
+                basis[b, k, k] = 1.0
+        elif parallel:
+            for k in range(3):
+                basis[b, 3 + k, 3] = plane_normals[first, k]
+    return basis
+
+
+@njit(cache=True, error_model="numpy")
+def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finger_directions, plane_normals, starts,
+                       ends, radii):
+    """Each gripper's free body (centre ``c`` (B, 3), ``orientation`` (B, 3, 3), segment ends in its frame (B, 3)
+    each, ``radius`` (B,)) as each of its rods sees it: the segment's ends (R, D) and radius (R,), written into
+    ``starts``, ``ends`` and ``radii``. In 3-D, world coordinates. A planar finger sees the section of the sphere by
+    its vertical plane: a circle centred (c·d, c_z) in the plane's (s, z), of radius √(R² − (c·n)²)."""
+    n_fingers = finger_directions.shape[0]
+    dim = starts.shape[1]
+    for b in range(c.shape[0]):
+        for f in range(n_fingers):
+            r = b * n_fingers + f
+            if dim == 3:
+                for k in range(3):
+                    starts[r, k] = c[b, k]
+                    ends[r, k] = c[b, k]
+                    for j in range(3):
+                        starts[r, k] += orientation[b, k, j] * segment_start[b, j]
+                        ends[r, k] += orientation[b, k, j] * segment_end[b, j]
+                radii[r] = radius[b]
+            else:
+                along = 0.0
+                across = 0.0
+                for k in range(3):
+                    along += c[b, k] * finger_directions[f, k]
+                    across += c[b, k] * plane_normals[f, k]
+                starts[r, 0] = ends[r, 0] = along
+                starts[r, 1] = ends[r, 1] = c[b, 2]
+                radii[r] = math.sqrt(max(radius[b] ** 2 - across**2, 0.0))
+
+
+__all__ = ["BodyArrays", "BodyState", "palm_reactions", "body_residual", "turned", "admissible_rotation",
+           "planar_body_basis", "body_in_rod_frames"]

@@ -1,0 +1,145 @@
+"""Compiled contact geometry: the grasped object as each finger's rod sees it, nodes inside it, and the normal part
+of a reaction. The corrector that uses them is :mod:`..solvers.corrector`; ``docs/contact.md`` describes the method.
+
+An object is a capsule, the points within a radius of a segment (a sphere is a capsule of zero length), so one set
+of kernels serves both. Contact is node-based: an edge between two nodes outside the object may still cut through
+it, by at most the sag of an edge of length Δl over the object's curvature, Δl²/(8·R) (0.07 mm for the paper's
+finger and ball).
+
+In the planar model a finger sees the object's section by its own vertical plane: a sphere of radius R whose centre
+is a distance d from the plane is a circle of radius √(R² − d²) there.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..scene.objects import GraspedObject
+
+
+def object_in_rod_frames(obj: GraspedObject, finger_directions: np.ndarray,
+                         planar: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The object as each finger's rod sees it: its segment's ends (F, D) and (F, D), and its radius (F,) [m].
+
+    In 3-D that is the object itself. In the planar model a sphere's section by the finger's plane is a circle (a
+    segment of zero length); see the module notes.
+    """
+    start, end = obj.segment
+    n_fingers = len(finger_directions)
+    if not planar:
+        return np.tile(start, (n_fingers, 1)), np.tile(end, (n_fingers, 1)), np.full(n_fingers, obj.radius)
+    center = start  # a sphere: the planar model refuses a capsule (Scene validation)
+    plane_normals = np.stack([-finger_directions[:, 1], finger_directions[:, 0], np.zeros(n_fingers)], axis=1)
+    distance = plane_normals @ center
+    radius = np.sqrt(np.maximum(obj.radius**2 - distance**2, 0.0))
+    centers = np.stack([finger_directions @ center, np.full(n_fingers, center[2])], axis=1)
+    return centers, centers, radius
+
+
+@njit(cache=True, error_model="numpy")
+def normal_reactions(positions, reactions, starts, ends):
+    """The component of each node's reaction (R, N, D) [N] along the outward normal of its rod's object there (the
+    direction from the nearest point of the segment ``starts``–``ends`` (R, D) to the node (R, N, D)), (R, N)."""
+    n_rods, n_nodes, dim = positions.shape
+    normal = np.empty((n_rods, n_nodes))
+    nearest = np.empty(dim)
+    for r in range(n_rods):
+        for i in range(n_nodes):
+            distance = _distance_to_segment(positions[r, i], starts[r], ends[r], nearest)
+            along = 0.0
+            for k in range(dim):
+                along += reactions[r, i, k] * (positions[r, i, k] - nearest[k])
+            normal[r, i] = along / distance
+    return normal
+
+
+def reachable(obj: GraspedObject, finger_directions: np.ndarray, length: float, planar: bool) -> np.ndarray:
+    """Which fingers can touch the object at all, (F,) bool: those whose base (the palm centre) lies within L + R
+    of the object's segment, as the rod sees it. Contact is never searched for the others."""
+    return within_reach(*object_in_rod_frames(obj, finger_directions, planar), length)
+
+
+@njit(cache=True, error_model="numpy")
+def within_reach(starts, ends, radii, length):
+    """Which rods (R,) can touch an object given as they see it (segment ends (R, D), radius (R,)): the object
+    must exist in the rod's frame (radius > 0) and its segment lie within ``length`` + radius of the palm, the
+    rods' origin."""
+    n_rods, dim = starts.shape
+    reach = np.empty(n_rods, dtype=np.bool_)
+    palm = np.zeros(dim)
+    nearest = np.empty(dim)
+    for r in range(n_rods):
+        reach[r] = radii[r] > 0.0 and _distance_to_segment(palm, starts[r], ends[r], nearest) < length + radii[r]
+    return reach
+
+
+@njit(cache=True, error_model="numpy")
+def _distance_to_segment(point, start, end, nearest):
+    """Distance from ``point`` to the segment start–end; writes the segment's nearest point into ``nearest``."""
+    dim = point.size
+    length2 = 0.0
+    along = 0.0
+    for k in range(dim):
+        length2 += (end[k] - start[k]) ** 2
+        along += (point[k] - start[k]) * (end[k] - start[k])
+    along = min(max(along / length2, 0.0), 1.0) if length2 > 0.0 else 0.0
+    distance2 = 0.0
+    for k in range(dim):
+        nearest[k] = start[k] + along * (end[k] - start[k])
+        distance2 += (point[k] - nearest[k]) ** 2
+    return math.sqrt(distance2)
+
+
+@njit(cache=True, error_model="numpy")
+def find_penetrations(positions, old_positions, shifts, starts, ends, radii, held, searched, first_free_node,
+                      tolerance, new_hold, hold_at):
+    """Marks in ``new_hold`` (R, N) every free node of a searched rod that lies inside its object (the points within
+    ``radii`` of the segment ``starts``–``ends``, (R, D) each) by more than ``tolerance`` [m], and writes where it is
+    held into ``hold_at`` (R, N, D): the point where its path over the step, relative to the object, entered the
+    surface. ``old_positions`` (R, N, D) are the nodes at the start of the step and ``shifts`` (R, D) the object's
+    displacement over it. A node already inside at the start is projected radially instead. Returns the number found
+    per rod."""
+    n_rods, n_nodes, dim = positions.shape
+    found = np.zeros(n_rods, dtype=np.int64)
+    nearest = np.empty(dim)
+    point = np.empty(dim)
+    begin = np.empty(dim)
+    for r in range(n_rods):
+        if not searched[r]:
+            continue
+        radius = radii[r]
+        for i in range(first_free_node, n_nodes):
+            if held[r, i]:
+                continue
+            distance = _distance_to_segment(positions[r, i], starts[r], ends[r], nearest)
+            if not (distance < radius - tolerance and distance > 0.0):
+                continue
+            for k in range(dim):
+                begin[k] = old_positions[r, i, k] + shifts[r, k]  # the start of the path, relative to the object
+                point[k] = positions[r, i, k]
+            if _distance_to_segment(begin, starts[r], ends[r], nearest) > radius:
+                low, high = 0.0, 1.0  # bisect for the entry: outside at `low`, inside at `high`
+                for _ in range(40):
+                    middle = 0.5 * (low + high)
+                    for k in range(dim):
+                        point[k] = begin[k] + middle * (positions[r, i, k] - begin[k])
+                    if _distance_to_segment(point, starts[r], ends[r], nearest) > radius:
+                        low = middle
+                    else:
+                        high = middle
+                for k in range(dim):
+                    point[k] = begin[k] + low * (positions[r, i, k] - begin[k])
+            distance = _distance_to_segment(point, starts[r], ends[r], nearest)
+            if distance == 0.0:
+                continue
+            new_hold[r, i] = True
+            found[r] += 1
+            for k in range(dim):
+                hold_at[r, i, k] = nearest[k] + (point[k] - nearest[k]) * radius / distance
+    return found
+
+
+__all__ = ["object_in_rod_frames", "normal_reactions", "reachable", "within_reach", "find_penetrations"]

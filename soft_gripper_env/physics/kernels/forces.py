@@ -1,0 +1,143 @@
+"""Compiled force kernels of one rod: linear damping, Morison drag and added mass, each adding its force and its
+negated Jacobian to the rod's Newton system (``docs/water.md``).
+
+Both water models enter the implicit solve with their Jacobians with respect to the velocity and the acceleration,
+which are exact and symmetric. Two approximations keep the Newton matrix symmetric. First, the added-mass matrix uses
+each edge's tangent at the start of the step. Second, the drag's dependence on the tangent turning within a step is
+left out of the Newton matrix, though not out of the force. Newton still converges in a few iterations
+(tests/physics/test_water.py).
+
+In the planar model each finger sees the current's component in its own vertical plane (:func:`rod_water_velocity`);
+the component across the plane would push a finger that cannot move that way, so it is dropped.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..scene.discretization import Discretization
+
+
+def rod_water_velocity(disc: Discretization, water_velocity: np.ndarray) -> np.ndarray:
+    """The water's velocity per gripper (B, 3) as each rod sees it, (R, D) [m/s]: world (3-D) or in the finger's
+    vertical plane (planar; the component across the plane would push a finger that cannot move that way)."""
+    if disc.dim == 3:
+        return np.repeat(water_velocity, len(disc.finger_directions), axis=0)
+    rods = np.empty((len(water_velocity), len(disc.finger_directions), 2))
+    rods[..., 0] = water_velocity @ disc.finger_directions.T
+    rods[..., 1] = water_velocity[:, 2:3]
+    return rods.reshape(-1, 2)
+
+
+@njit(cache=True, error_model="numpy")
+def linear_damping(coefficient, velocities, velocity_derivative, stride, force, band):
+    """Adds −c_i·v_i to one rod's ``force`` (N, D) and c_i·∂v/∂q to the position diagonal of its ``band``
+    (n, kd+1)."""
+    n_nodes, dim = velocities.shape
+    kd = band.shape[1] - 1
+    for i in range(n_nodes):
+        c = coefficient[i]
+        for k in range(dim):
+            force[i, k] -= c * velocities[i, k]
+            band[stride * i + k, kd] += c * velocity_derivative
+
+
+@njit(cache=True, error_model="numpy")
+def _add_edge_block(band_r, stride, i, dim, block, scale):
+    """Add scale·[[B, B], [B, B]] over the position DOFs of nodes i and i+1 to one rod's band (lower part)."""
+    kd = band_r.shape[1] - 1
+    for a in range(dim):
+        for b in range(dim):
+            value = scale * block[a, b]
+            row_i = stride * i + a
+            col_i = stride * i + b
+            row_j = row_i + stride
+            col_j = col_i + stride
+            if row_i >= col_i:
+                band_r[row_i, kd - row_i + col_i] += value
+                band_r[row_j, kd - row_j + col_j] += value
+            band_r[row_j, kd - row_j + col_i] += value
+
+
+@njit(cache=True, error_model="numpy")
+def _edge_tangent(positions, e, t):
+    """Writes the unit tangent of edge e of one rod (positions (N, D)) into ``t`` (D,)."""
+    length2 = 0.0
+    for k in range(t.size):
+        t[k] = positions[e + 1, k] - positions[e, k]
+        length2 += t[k] * t[k]
+    inverse_length = 1.0 / math.sqrt(length2)
+    for k in range(t.size):
+        t[k] *= inverse_length
+
+
+@njit(cache=True, error_model="numpy")
+def morison_drag(positions, velocities, current, normal, tangential, velocity_derivative, stride, force, band):
+    """Morison drag of every edge of one rod: adds the force to ``force`` (N, D) and its velocity Jacobian to
+    ``band`` (n, kd+1).
+
+    ``normal``, ``tangential``: ½·ρ_w·C·D·l̄ per edge [kg/m] (the tangential one with π·D); ``current`` (D,).
+    """
+    n_nodes, dim = positions.shape
+    t = np.empty(dim)
+    w = np.empty(dim)
+    wn = np.empty(dim)
+    block = np.empty((dim, dim))
+    for e in range(n_nodes - 1):
+        _edge_tangent(positions, e, t)
+        s = 0.0
+        for k in range(dim):
+            w[k] = 0.5 * (velocities[e, k] + velocities[e + 1, k]) - current[k]
+            s += w[k] * t[k]
+        speed_n2 = 0.0
+        for k in range(dim):
+            wn[k] = w[k] - s * t[k]
+            speed_n2 += wn[k] * wn[k]
+        speed_n = math.sqrt(speed_n2)
+        cn = normal[e]
+        ct = tangential[e]
+        for k in range(dim):
+            f = -cn * speed_n * wn[k] - ct * abs(s) * s * t[k]
+            force[e, k] += 0.5 * f
+            force[e + 1, k] += 0.5 * f
+        # ∂(edge force)/∂w = −[C_n·(|w_n|·P + w_n w_nᵀ/|w_n|) + 2·C_t·|s|·t tᵀ], P = I − t tᵀ
+        for a in range(dim):
+            for b in range(dim):
+                projector = (1.0 if a == b else 0.0) - t[a] * t[b]
+                value = cn * speed_n * projector + 2.0 * ct * abs(s) * t[a] * t[b]
+                if speed_n > 0.0:
+                    value += cn * wn[a] * wn[b] / speed_n
+                block[a, b] = value
+        # w = (v_e + v_{e+1})/2 and each node takes half the force: a factor ¼ on every node pair
+        _add_edge_block(band, stride, e, dim, block, 0.25 * velocity_derivative)
+
+
+@njit(cache=True, error_model="numpy")
+def added_mass(start_positions, accelerations, edge_mass, acceleration_derivative, stride, force, band):
+    """Added-mass force −Σ ½·m_a·(I − t tᵀ)·a_node of every edge of one rod, with tangents at the start of the
+    step; adds the force to ``force`` (N, D) and ½·m_a·(I − t tᵀ)·∂a/∂q on the node blocks of ``band``."""
+    n_nodes, dim = start_positions.shape
+    t = np.empty(dim)
+    block = np.empty((dim, dim))
+    kd = band.shape[1] - 1
+    for e in range(n_nodes - 1):
+        _edge_tangent(start_positions, e, t)
+        half = 0.5 * edge_mass[e]
+        for a in range(dim):
+            for b in range(dim):
+                block[a, b] = half * ((1.0 if a == b else 0.0) - t[a] * t[b])
+        for node in (e, e + 1):
+            for a in range(dim):
+                f = 0.0
+                for b in range(dim):
+                    f -= block[a, b] * accelerations[node, b]
+                force[node, a] += f
+                row = stride * node + a
+                for b in range(a + 1):
+                    band[row, kd - a + b] += acceleration_derivative * block[a, b]
+
+
+__all__ = ["rod_water_velocity", "linear_damping", "morison_drag", "added_mass"]

@@ -1,0 +1,104 @@
+"""The fluid the gripper works in: one scene-level description that the rods' forces and the free body both read.
+
+A :class:`Fluid` has a density, a viscosity and a :class:`Current`. The force models (:mod:`.forces`) take the
+density and viscosity from it, and the simulator moves the water at every gripper with its current, so one scene
+has one fluid and nothing keeps a second copy of its constants.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .validation import check_range
+
+WATER_DENSITY = 1000.0
+"""Density of fresh water [kg/m³] (sea water is about 1025)."""
+WATER_VISCOSITY = 1.0e-3
+"""Dynamic viscosity of water at about 20 °C [Pa·s]."""
+
+
+@dataclass(frozen=True)
+class Current:
+    """A uniform water current u(t) = velocity + oscillation·sin(2π·t/period + phase) [m/s], world frame."""
+
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Mean current [m/s]."""
+    oscillation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Amplitude of the oscillating part [m/s]."""
+    period: float = 1.0
+    """Period of the oscillating part [s]."""
+    phase: float = 0.0
+    """Phase of the oscillating part at t = 0 [rad]."""
+
+    def __post_init__(self) -> None:
+        for name in ("velocity", "oscillation"):
+            value = tuple(float(v) for v in getattr(self, name))
+            if len(value) != 3:
+                raise ValueError(f"Current.{name} = {getattr(self, name)!r} must have 3 components [m/s]")
+            for v in value:
+                check_range("Current", name, v, "m/s", -100.0, 100.0, low_inclusive=True)
+            object.__setattr__(self, name, value)
+        check_range("Current", "period", self.period, "s", 0.0)
+        check_range("Current", "phase", self.phase, "rad", -1e3, 1e3, low_inclusive=True)
+
+    def at(self, time: float) -> np.ndarray:
+        """Current velocity at ``time`` [m/s], (3,)."""
+        return CurrentBatch.of((self,)).at(time)[0]
+
+
+class CurrentBatch:
+    """The currents of a batch of grippers, as arrays: mean and amplitude (B, 3) [m/s], period (B,) [s], phase (B,)
+    [rad], and the batch time at which each gripper's own clock reads 0 (B,) [s]. A gripper's entry is replaced with
+    :meth:`load`."""
+
+    def __init__(self, batch_size: int) -> None:
+        self.velocity = np.zeros((batch_size, 3))
+        self.oscillation = np.zeros((batch_size, 3))
+        self.period = np.ones(batch_size)
+        self.phase = np.zeros(batch_size)
+        self.start_time = np.zeros(batch_size)
+
+    @classmethod
+    def of(cls, currents) -> CurrentBatch:
+        batch = cls(len(currents))
+        for index, current in enumerate(currents):
+            batch.load(index, current)
+        return batch
+
+    def load(self, index: int, current: Current) -> None:
+        self.velocity[index] = current.velocity
+        self.oscillation[index] = current.oscillation
+        self.period[index] = current.period
+        self.phase[index] = current.phase
+
+    def at(self, time: float) -> np.ndarray:
+        """The water's velocity at every gripper at ``time`` [m/s], (B, 3)."""
+        angle = 2 * math.pi * (time - self.start_time) / self.period + self.phase
+        return self.velocity + self.oscillation * np.sin(angle)[:, None]
+
+
+@dataclass(frozen=True)
+class Fluid:
+    """The fluid around the gripper: its density, viscosity and current (SI units)."""
+
+    density: float = WATER_DENSITY
+    """ρ_w [kg/m³]."""
+    viscosity: float = WATER_VISCOSITY
+    """Dynamic viscosity η [Pa·s]."""
+    current: Current = field(default_factory=Current)
+    """The uniform current the fluid flows with [m/s]."""
+
+    def __post_init__(self) -> None:
+        check_range("Fluid", "density", self.density, "kg/m³", 0.0, 1e5, low_inclusive=True)
+        check_range("Fluid", "viscosity", self.viscosity, "Pa·s", 0.0, 1e6, low_inclusive=True)
+        if not isinstance(self.current, Current):
+            raise ValueError(f"Fluid.current must be a Current, got {type(self.current).__name__}")
+
+
+WATER = Fluid()
+"""Still fresh water at about 20 °C."""
+
+__all__ = ["WATER_DENSITY", "WATER_VISCOSITY", "Current", "CurrentBatch", "Fluid", "WATER"]

@@ -1,0 +1,134 @@
+"""The objects a gripper may grasp, and the settings of contact with them (SI units).
+
+A :class:`Sphere`, or a :class:`Capsule` (the points within a radius of a segment; a sphere is a capsule of zero
+length, and one set of kernels serves both), fixed in space or free when it has a density. How contact with them
+is found and resolved is described in ``docs/contact.md``; the kernels are :mod:`..kernels.contact` and the
+corrector :mod:`..solvers.corrector`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import KW_ONLY, dataclass
+
+import numpy as np
+
+from .validation import check_range
+
+PENETRATION_TOLERANCE = 1e-6
+"""No free node ends a step deeper inside the object than this [m]."""
+
+
+@dataclass(frozen=True)
+class _Body:
+    """What a grasped object has whether it is a sphere or a capsule: fixed, or free with a density."""
+
+    _: KW_ONLY
+    density: float | None = None
+    """Mass density [kg/m³] of a free object; None for an object fixed in space."""
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Initial velocity of a free object [m/s]."""
+
+    @property
+    def free(self) -> bool:
+        return self.density is not None
+
+
+@dataclass(frozen=True)
+class Sphere(_Body):
+    """A rigid sphere: fixed in space (the paper's ball is :data:`PAPER_BALL`), or free when it has a density, moved
+    by gravity, buoyancy, drag, added mass and the contact reactions (:mod:`.rigid_body`)."""
+
+    radius: float
+    """Radius [m]."""
+    center: tuple[float, float, float]
+    """Centre in the world frame [m] (at t = 0, for a free sphere)."""
+
+    def __post_init__(self) -> None:
+        check_range("Sphere", "radius", self.radius, "m", 0.0)
+        center = tuple(float(c) for c in self.center)
+        if len(center) != 3:
+            raise ValueError(f"Sphere.center = {self.center!r} must have 3 components [m]")
+        for c in center:
+            check_range("Sphere", "center", c, "m", -1e3, 1e3)
+        object.__setattr__(self, "center", center)
+        _check_motion(self)
+
+    @property
+    def segment(self) -> tuple[np.ndarray, np.ndarray]:
+        """The object as a swept sphere: the segment its surface is at ``radius`` from (a point, for a sphere)."""
+        return np.asarray(self.center), np.asarray(self.center)
+
+
+def _check_motion(obj) -> None:
+    """Validates the ``density`` and initial ``velocity`` of a sphere or capsule."""
+    kind = type(obj).__name__
+    if obj.density is not None:
+        check_range(kind, "density", obj.density, "kg/m³", 0.0, 1e5)
+    velocity = tuple(float(v) for v in obj.velocity)
+    if len(velocity) != 3:
+        raise ValueError(f"{kind}.velocity = {obj.velocity!r} must have 3 components [m/s]")
+    for v in velocity:
+        check_range(kind, "velocity", v, "m/s", -100.0, 100.0, low_inclusive=True)
+    if any(velocity) and obj.density is None:
+        raise ValueError(f"{kind}.velocity needs {kind}.density: an object fixed in space cannot move")
+    object.__setattr__(obj, "velocity", velocity)
+
+
+@dataclass(frozen=True)
+class Capsule(_Body):
+    """A rigid capsule (a cylinder with hemispherical ends): every point within ``radius`` of the segment from
+    ``start`` to ``end``. Fixed in space, or free when it has a density. Contact with it needs the 3-D rod model."""
+
+    radius: float
+    """Radius [m]."""
+    start: tuple[float, float, float]
+    """One end of the axis, world frame [m] (at t = 0, for a free capsule)."""
+    end: tuple[float, float, float]
+    """The other end of the axis, world frame [m]."""
+
+    def __post_init__(self) -> None:
+        check_range("Capsule", "radius", self.radius, "m", 0.0)
+        for name in ("start", "end"):
+            point = tuple(float(c) for c in getattr(self, name))
+            if len(point) != 3:
+                raise ValueError(f"Capsule.{name} = {getattr(self, name)!r} must have 3 components [m]")
+            for c in point:
+                check_range("Capsule", name, c, "m", -1e3, 1e3)
+            object.__setattr__(self, name, point)
+        _check_motion(self)
+
+    @property
+    def segment(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.asarray(self.start), np.asarray(self.end)
+
+
+GraspedObject = Sphere | Capsule
+
+
+PAPER_BALL = Sphere(radius=0.065, center=(0.0, 0.0, -0.09))
+"""The paper's ball: R = 0.065 m, centre (0, 0, −0.09) m, fixed."""
+
+
+@dataclass(frozen=True)
+class ContactSettings:
+    max_corrector_iterations: int = 10
+    """Re-solves of one step allowed for new contacts and releases."""
+    palm_stiffness: float = 1000.0
+    """The palm, a disc of radius ``palm_radius`` about the z axis in the plane z = 0 of the finger bases, pushes
+    a free object that overlaps it back down with this stiffness [N/m] (1 mm of overlap per newton), critically
+    damped for the object's mass; 0 turns it off. Contact is node-based, so the palm, like the fingers, is its
+    centre plane. Without it an object pushed up by the fingers would pass the clamped nodes and be crushed
+    against the finger roots."""
+    palm_radius: float = 0.03
+    """Radius of the palm disc [m]: the finger roots (the two clamped nodes reach 0.021 m) and a little more."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.max_corrector_iterations, (int, np.integer)) or \
+                not 0 <= self.max_corrector_iterations <= 100:
+            raise ValueError(f"ContactSettings.max_corrector_iterations = {self.max_corrector_iterations!r} is "
+                             f"outside the allowed range [0, 100] (integer count)")
+        check_range("ContactSettings", "palm_stiffness", self.palm_stiffness, "N/m", 0.0, 1e9, low_inclusive=True)
+        check_range("ContactSettings", "palm_radius", self.palm_radius, "m", 0.0, 10.0, low_inclusive=True)
+
+
+__all__ = ["PENETRATION_TOLERANCE", "Sphere", "Capsule", "GraspedObject", "PAPER_BALL", "ContactSettings"]

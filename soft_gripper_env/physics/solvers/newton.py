@@ -1,0 +1,578 @@
+"""Newton's method for every rod of a batch, and for rods and a free body together: one compiled loop.
+
+Backward Euler on the free DOFs q of a rod (the integrators build every other scheme from it,
+:mod:`.integrators`):
+
+    M·(q − q_old − Δt·v_old)/Δt² − f(q, (q − q_old)/Δt) = 0,
+
+solved from the predictor q_old + Δt·v_old plus the last step's motion, Δt²·a_old. :func:`newton` runs the loop for
+every gripper of a batch in one call:
+
+- **Rods on their own, or held on an object that does not move** (no object, or a fixed one): each rod is its own
+  system and stops iterating as soon as its own residual meets the tolerance, so its result does not depend on what
+  else shares its batch. Nodes held by contact are fixed DOFs that the corrector has put on the object's surface.
+- **Rods and a free body**: held nodes move with the body, x_h = c + R·r_h, so a gripper's rods and its body form
+  one system. Each rod's free DOFs are eliminated with its own banded factorisation (:func:`eliminate_rods`), which
+  leaves a 6×6 system for the body per gripper (a Schur complement); the gripper iterates until all of it
+  converges, with a backtracking line search on the body's step (a new hold far from the body can throw Newton off;
+  the body is the only coupling, so rods on their own need none). A staggered scheme, which would move the body
+  with last iteration's reactions, is unstable for a body as light as the water it displaces; this one is not.
+
+One iteration is the same named steps in both cases (:func:`_rod_residual`, :func:`eliminate_rods`,
+:func:`_body_step`, :func:`_apply_step`); the body's own equations are :mod:`..kernels.body`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ..kernels.assembly import assemble_rod
+from ..kernels.body import BodyState, admissible_rotation, body_residual, turned
+from ..kernels.linalg import factor_banded_symmetric, solve_factored
+
+
+class SolverArrays(NamedTuple):
+    """Newton's and the corrector's settings for steps of one length, as the kernels take them."""
+
+    mass_term: np.ndarray
+    """M/Δt² of every DOF of one rod [kg/s² or kg·m²/s²], (n,)."""
+    tolerance_inverse: np.ndarray
+    """1/tolerance of every DOF of every rod [1/N or 1/(N·m)], (R, n); 0 on clamped DOFs."""
+    clamp_free: np.ndarray
+    """The DOFs the clamp leaves free, (R, n) bool."""
+    body_tolerance: np.ndarray
+    """The body's force and moment tolerances [N, N·m], (6,)."""
+    max_iterations: int
+    """Newton iterations (linear solves) allowed per solve."""
+    n_fingers: int
+    """Rods per gripper F."""
+    max_corrector_iterations: int
+    """Re-solves of one step allowed for new contacts and releases."""
+    first_free_node: int
+    """The first node contact is searched for (the clamped nodes belong to the palm)."""
+    force_tolerance: float
+    """Newton's tolerance on a force DOF [N]: a reaction pulling by less is zero to that tolerance."""
+    finger_length: float
+    """L [m], for the reach test of the contact search."""
+
+
+class SolveResult(NamedTuple):
+    """What a solve writes, per rod (R,); with a free body, each rod of a gripper carries the gripper's values."""
+
+    converged: np.ndarray
+    """Whether the residual met its tolerance, bool."""
+    iterations: np.ndarray
+    """Linear solves (Newton iterations), int."""
+    ratio: np.ndarray
+    """The largest free-DOF residual divided by its tolerance (dimensionless; inf where a factorisation failed)."""
+    residual: np.ndarray
+    """M·(q − q_pred)/Δt² − f at the solution, (R, n) [N, N·m]: on held DOFs, the contact reaction."""
+    corrector: np.ndarray
+    """The corrector's re-solves, int."""
+    changed: np.ndarray
+    """Whether the corrector's last test still changed the rod's contacts, bool."""
+
+
+class Holds(NamedTuple):
+    """Where the held nodes are, and how each rod sees the world."""
+
+    held: np.ndarray
+    """Nodes held on the object, (R, N) bool."""
+    offsets: np.ndarray
+    """Each held node's offset from a free body's centre in the body's frame [m], (R, N, 3)."""
+    projection: np.ndarray
+    """Rod coordinates from world vectors, (R, D, 3)."""
+
+
+class BodyMotion(NamedTuple):
+    """The grasped bodies' unknowns over a step and what they start from; ``moves`` False for a fixed object (or
+    none), whose arrays the solve then leaves alone."""
+
+    moves: bool
+    position: np.ndarray
+    """The centre c at the end of the step [m], (B, 3): Newton's start on entry, the solution on return."""
+    rotation: np.ndarray
+    """The rotation θ over the step [rad], R = exp([θ]×)·R_old, (B, 3): start and solution, as ``position``."""
+    orientation: np.ndarray
+    """R at the solution, (B, 3, 3), written by the solve."""
+    old: BodyState
+    """The bodies at the start of the step (:class:`~..kernels.body.BodyState`)."""
+    water: np.ndarray
+    """The current at each body [m/s], (B, 3)."""
+
+
+MAX_STEP_HALVINGS = 6
+"""How often the coupled Newton solve may halve a step that made its residual worse (a backtracking line search)."""
+
+
+
+@njit(cache=True, error_model="numpy")
+def eliminate_rods(band, residual, coupling, free, coupled, active, x0, x_coupling, body_block, body_rhs, factored):
+    """Eliminates each rod's free DOFs from the coupled Newton system.
+
+    ``band`` (R, n, kd+1): the rod's Newton matrix A (overwritten by its factors); ``residual`` (R, n): G;
+    ``coupling`` (R, n, 6): S, the motion of each held DOF per unit body motion (zero on other DOFs); ``free``
+    (R, n): the DOFs solved for. Writes x0 = A_FF⁻¹·G_F (R, n), X = A_FF⁻¹·(A·S)_F (R, n, 6), the rod's part of the
+    body's matrix Sᵀ·A·S − (A·S)_Fᵀ·X into ``body_block`` (R, 6, 6), and (A·S)_Fᵀ·x0 into ``body_rhs`` (R, 6).
+    A rod that holds nothing (``coupled`` False, S = 0) only solves for x0, and leaves the other outputs as given
+    (zero); a rod that is not ``active`` is left alone. Writes whether each rod's factorisation succeeded into
+    ``factored`` and returns the number that failed.
+    """
+    n_rods, n, kd1 = band.shape
+    kd = kd1 - 1
+    product = np.empty((n, 6))
+    column = np.empty(n)
+    failures = 0
+    for r in range(n_rods):
+        if not active[r]:
+            continue
+        a = band[r]
+        s = coupling[r]
+        if coupled[r]:  # Sᵀ·A·S needs A before it is factored
+            product[:, :] = 0.0  # A·S from the symmetric lower band
+            for i in range(n):
+                for j in range(max(0, i - kd), i + 1):
+                    value = a[i, kd - i + j]
+                    if value == 0.0:
+                        continue
+                    for k in range(6):
+                        product[i, k] += value * s[j, k]
+                        if i != j:
+                            product[j, k] += value * s[i, k]
+            for k in range(6):
+                for m in range(6):
+                    total = 0.0
+                    for i in range(n):
+                        total += s[i, k] * product[i, m]
+                    body_block[r, k, m] = total
+        factored[r] = factor_banded_symmetric(a, free[r])
+        if not factored[r]:
+            failures += 1
+            x0[r, :] = np.nan
+            continue
+        x0[r, :] = residual[r]
+        solve_factored(a, x0[r], free[r])
+        if not coupled[r]:
+            continue
+        for k in range(6):
+            for i in range(n):
+                column[i] = product[i, k] if free[r, i] else 0.0
+            solve_factored(a, column, free[r])
+            x_coupling[r, :, k] = column
+        for k in range(6):
+            total = 0.0
+            for i in range(n):
+                if free[r, i]:
+                    total += product[i, k] * x0[r, i]
+            body_rhs[r, k] = total
+            for m in range(6):
+                total = 0.0
+                for i in range(n):
+                    if free[r, i]:
+                        total += product[i, k] * x_coupling[r, i, m]
+                body_block[r, k, m] -= total
+    return failures
+
+
+@njit(cache=True, error_model="numpy")
+def newton(q, step, rods, terms, solver, free, holds, body, motion, basis, solve, result):
+    """Newton's method for the rods where ``solve`` (R,) is True, each gripper at once (see the module notes).
+
+    ``q`` (R, N, S) holds the start and receives the solution; only DOFs where ``free`` (R, n) is True move. With the
+    residual r = M·(q − q_pred)/Δt² − f, a rod (or, with a free body, a gripper, whose rods are then all solved) has
+    converged when its largest |r|·tolerance_inverse over free DOFs, and the body's residual over its tolerance, is
+    ≤ 1. ``step`` is :class:`~..kernels.assembly.StepInputs`, ``rods`` :class:`~..kernels.assembly.RodArrays`,
+    ``terms`` the scene's :class:`~..scene.forces.ForceTerms`, ``solver`` :class:`SolverArrays`, ``holds``
+    :class:`Holds`, ``body`` :class:`~..kernels.body.BodyArrays`, ``motion`` :class:`BodyMotion` and ``basis``
+    (B, 6, 6) the free bodies' admissible motions (zero columns unused). Writes every solved rod's ``converged``,
+    ``iterations``, ``ratio`` and ``residual`` into ``result`` (:class:`SolveResult`). A rod whose factorisation
+    fails stops with ratio inf.
+    """
+    work = _new_work(q, step.water.shape[1], solver.n_fingers)
+    for b in range(q.shape[0] // solver.n_fingers):
+        _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, basis, solve, result, work)
+
+
+class _NewtonWork(NamedTuple):
+    """Scratch of one gripper's solve, allocated once per call of :func:`newton`."""
+
+    force: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    bands: np.ndarray
+    coupling: np.ndarray
+    x0: np.ndarray
+    x_coupling: np.ndarray
+    block: np.ndarray
+    rhs: np.ndarray
+    rod_delta: np.ndarray
+    rod_ratio: np.ndarray
+    active: np.ndarray
+    touching: np.ndarray
+    factored: np.ndarray
+    body_residual: np.ndarray
+    body_matrix: np.ndarray
+    body_total: np.ndarray
+    body_step: np.ndarray
+    rotation: np.ndarray
+
+
+@njit(cache=True, error_model="numpy")
+def _new_work(q, dim, n_fingers):
+    n_nodes, stride = q.shape[1], q.shape[2]
+    n = n_nodes * stride
+    band_width = 3 * stride - 1
+    return _NewtonWork(np.empty((n_nodes, stride)), np.empty((n_nodes, dim)), np.empty((n_nodes, dim)),
+                       np.empty((n_fingers, n, band_width + 1)), np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)),
+                       np.empty((n_fingers, n, 6)), np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)),
+                       np.zeros((n_fingers, n)), np.empty(n_fingers), np.empty(n_fingers, dtype=np.bool_),
+                       np.zeros(n_fingers, dtype=np.bool_), np.empty(n_fingers, dtype=np.bool_), np.empty(6),
+                       np.empty((6, 6)), np.empty(6), np.empty(6), np.empty((3, 3)))
+
+
+@njit(cache=True, error_model="numpy")
+def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, basis, solve, result, work):
+    """Newton's method for gripper b's rods where ``solve`` is True (all of them, and the body, with a free body)."""
+    n_fingers = solver.n_fingers
+    first = b * n_fingers
+    coupled = motion.moves
+    any_rod = False
+    for f in range(n_fingers):
+        work.active[f] = coupled or solve[first + f]
+        any_rod |= solve[first + f]
+    if not any_rod:
+        return
+    for f in range(n_fingers):
+        if work.active[f]:
+            result.converged[first + f] = False
+            result.iterations[first + f] = 0
+            result.ratio[first + f] = np.inf
+        work.touching[f] = coupled and holds.held[first + f].any()
+    gripper_ratio = np.inf
+    halvings = 0
+    iterations = 0
+    if coupled:
+        admissible_rotation(basis[b], motion.rotation[b])  # Newton's start, as Newton's steps, within the basis
+    for it in range(solver.max_iterations + 1):
+        largest = 0.0
+        if coupled:
+            turned(motion.rotation[b], motion.old.orientation[b], work.rotation, motion.orientation[b])
+            body_residual(b, body, motion.position, motion.rotation, motion.old, motion.orientation[b], step.dt,
+                          motion.water, work.body_residual, work.body_matrix)
+        for f in range(n_fingers):
+            if not work.active[f]:
+                continue
+            if work.touching[f]:
+                _place_held_nodes(b, first + f, q, holds, motion, work.coupling[f])
+            work.rod_ratio[f], largest = _rod_residual(first + f, q, step, rods, terms, solver, free, result.residual,
+                                                       largest, work, f)
+        if coupled:
+            largest = _body_residual_in_basis(basis[b], solver.body_tolerance, work.body_residual, work.body_total,
+                                              largest)
+            if largest <= 1.0:
+                gripper_ratio = largest
+                _finish_gripper(first, n_fingers, True, iterations, gripper_ratio, result)
+                return
+            if it > 0 and not largest < gripper_ratio and halvings < MAX_STEP_HALVINGS:
+                # the last step made the residual worse (a new hold far from the body can throw Newton off): go
+                # back and take half of it
+                halvings += 1
+                _back_off(b, first, q, motion, work, 0.5**halvings)
+                continue
+            gripper_ratio = largest
+            halvings = 0
+            if it == solver.max_iterations:
+                break
+        elif not _rods_continue(first, it, solver.max_iterations, result, work):
+            return
+        for f in range(n_fingers):
+            if work.active[f]:
+                band = work.bands[f]
+                for j in range(band.shape[0]):
+                    band[j, band.shape[1] - 1] += solver.mass_term[j]
+        if coupled:
+            work.block[:, :, :] = 0.0
+            work.rhs[:, :] = 0.0
+        rods_in = slice(first, first + n_fingers)
+        failures = eliminate_rods(work.bands, result.residual[rods_in], work.coupling, free[rods_in], work.touching,
+                                  work.active, work.x0, work.x_coupling, work.block, work.rhs, work.factored)
+        if coupled:
+            if failures:
+                gripper_ratio = np.inf
+                break
+            _body_step(b, basis[b], work)
+        else:
+            for f in range(n_fingers):
+                if work.active[f] and not work.factored[f]:
+                    result.ratio[first + f] = np.inf
+                    work.active[f] = False
+        _apply_step(b, first, q, free, motion, coupled, work)
+        iterations += 1
+        if not coupled:
+            for f in range(n_fingers):
+                if work.active[f]:
+                    result.iterations[first + f] += 1
+    if coupled:
+        _finish_gripper(first, n_fingers, False, iterations, gripper_ratio, result)
+
+
+@njit(cache=True, error_model="numpy")
+def _place_held_nodes(b, r, q, holds, motion, coupling):
+    """Puts rod r's held nodes on the body, x = P·(c + R·r_h), and writes S = P·[I, −[a]×], the motion of each held
+    DOF per unit body motion, into ``coupling`` (n, 6) (zero rows elsewhere)."""
+    stride = q.shape[2]
+    dim = holds.projection.shape[1]
+    orientation = motion.orientation[b]
+    c = motion.position
+    a = np.empty(3)
+    world = np.empty(3)
+    cross = np.empty((3, 3))
+    coupling[:, :] = 0.0
+    for i in range(q.shape[1]):
+        if not holds.held[r, i]:
+            continue
+        for k in range(3):
+            a[k] = orientation[k, 0] * holds.offsets[r, i, 0] + orientation[k, 1] * holds.offsets[r, i, 1] \
+                + orientation[k, 2] * holds.offsets[r, i, 2]
+            world[k] = c[b, k] + a[k]
+        cross[0, 0], cross[0, 1], cross[0, 2] = 0.0, -a[2], a[1]
+        cross[1, 0], cross[1, 1], cross[1, 2] = a[2], 0.0, -a[0]
+        cross[2, 0], cross[2, 1], cross[2, 2] = -a[1], a[0], 0.0
+        projection = holds.projection[r]
+        for d in range(dim):
+            row = stride * i + d
+            q[r, i, d] = projection[d, 0] * world[0] + projection[d, 1] * world[1] + projection[d, 2] * world[2]
+            for k in range(3):
+                coupling[row, k] = projection[d, k]
+                coupling[row, 3 + k] = -(projection[d, 0] * cross[0, k] + projection[d, 1] * cross[1, k]
+                                         + projection[d, 2] * cross[2, k])
+
+
+@njit(cache=True, error_model="numpy")
+def _rod_residual(r, q, step, rods, terms, solver, free, residual, largest, work, f):
+    """Assembles rod r (finger f of its gripper) and writes its residual (n,) into ``residual[r]``, its Newton matrix
+    into ``work.bands[f]``; a touching rod's reactions load the body (``work.body_residual``). Returns the rod's
+    largest scaled residual and ``largest`` updated with it (NaN is caught: it never compares as small)."""
+    n = residual.shape[1]
+    assemble_rod(r, q, step, rods, terms, True, work.force, work.bands[f], work.velocity, work.acceleration)
+    q_r = q[r].reshape(n)
+    q_pred_r = step.q_pred[r].reshape(n)
+    force_r = work.force.reshape(n)
+    own = 0.0
+    touching = work.touching[f]
+    for j in range(n):
+        residual[r, j] = solver.mass_term[j] * (q_r[j] - q_pred_r[j]) - force_r[j]
+        scaled = abs(residual[r, j]) * solver.tolerance_inverse[r, j] if free[r, j] else 0.0
+        if not scaled <= own:
+            own = scaled
+        if not scaled <= largest:
+            largest = scaled
+        if touching:
+            for k in range(6):
+                work.body_residual[k] += work.coupling[f, j, k] * residual[r, j]
+    return own, largest
+
+
+@njit(cache=True, error_model="numpy")
+def _body_residual_in_basis(basis, body_tolerance, own, total, largest):
+    """The body's residual ``own`` (6,) in its admissible motions, Bᵀ·own, into ``total``; returns ``largest``
+    updated with its scaled entries."""
+    for k in range(6):
+        total[k] = 0.0
+        for i in range(6):
+            total[k] += basis[i, k] * own[i]
+        scaled = abs(total[k]) / body_tolerance[k]
+        if not scaled <= largest:
+            largest = scaled
+    return largest
+
+
+@njit(cache=True, error_model="numpy")
+def _rods_continue(first, it, max_iterations, result, work):
+    """For rods on their own: marks the rods that converged (or ran out of iterations) as done; returns whether
+    any still iterates."""
+    going = False
+    for f in range(work.active.size):
+        if not work.active[f]:
+            continue
+        r = first + f
+        result.ratio[r] = work.rod_ratio[f]
+        if work.rod_ratio[f] <= 1.0:
+            result.converged[r] = True
+            work.active[f] = False
+        elif it == max_iterations:
+            work.active[f] = False
+        going |= work.active[f]
+    return going
+
+
+@njit(cache=True, error_model="numpy")
+def _body_step(b, basis, work):
+    """The body's Newton step (6,) into ``work.body_step``, from the reduced system Bᵀ·A·B δ = −Bᵀ·G + Bᵀ·Σ rhs
+    (A the body's matrix plus the rods' Schur complements; unused columns of B get the identity)."""
+    matrix = work.body_matrix
+    for f in range(work.block.shape[0]):
+        for i in range(6):
+            for j in range(6):
+                matrix[i, j] += work.block[f, i, j]
+    reduced = np.empty((6, 6))
+    reduced_rhs = np.empty(6)
+    total = work.body_total  # Bᵀ·G from _body_residual_in_basis
+    step = work.body_step
+    for k in range(6):
+        used = False
+        for i in range(6):
+            if basis[i, k] != 0.0:
+                used = True
+        value = -total[k]
+        for f in range(work.rhs.shape[0]):
+            for i in range(6):
+                value += basis[i, k] * work.rhs[f, i]
+        reduced_rhs[k] = value
+        for m in range(6):
+            value = 0.0
+            for i in range(6):
+                for j in range(6):
+                    value += basis[i, k] * matrix[i, j] * basis[j, m]
+            reduced[k, m] = value + (1.0 if k == m and not used else 0.0)
+    solution = np.linalg.solve(reduced, reduced_rhs)
+    for i in range(6):
+        step[i] = 0.0
+        for k in range(6):
+            step[i] += basis[i, k] * solution[k]
+
+
+@njit(cache=True, error_model="numpy")
+def _apply_step(b, first, q, free, motion, coupled, work):
+    """Moves every active rod by its Newton step, −x0 − X·δ (δ the body's step, for rods that touch it), and the
+    body by δ; remembers the rods' steps for the line search."""
+    n = work.x0.shape[1]
+    for f in range(work.active.size):
+        if not work.active[f]:
+            continue
+        r = first + f
+        q_r = q[r].reshape(n)
+        for j in range(n):
+            delta = 0.0
+            if free[r, j]:
+                delta = -work.x0[f, j]
+                if work.touching[f]:
+                    for k in range(6):
+                        delta -= work.x_coupling[f, j, k] * work.body_step[k]
+            work.rod_delta[f, j] = delta
+            q_r[j] += delta
+    if coupled:
+        for k in range(3):
+            motion.position[b, k] += work.body_step[k]
+            motion.rotation[b, k] += work.body_step[3 + k]
+
+
+@njit(cache=True, error_model="numpy")
+def _back_off(b, first, q, motion, work, fraction):
+    """Takes ``fraction`` of the last Newton step back, rods and body (the line search of a free body's solve)."""
+    n = work.rod_delta.shape[1]
+    for f in range(work.active.size):
+        q_r = q[first + f].reshape(n)
+        for j in range(n):
+            q_r[j] -= fraction * work.rod_delta[f, j]
+    for k in range(3):
+        motion.position[b, k] -= fraction * work.body_step[k]
+        motion.rotation[b, k] -= fraction * work.body_step[3 + k]
+
+
+@njit(cache=True, error_model="numpy")
+def _finish_gripper(first, n_fingers, converged, iterations, ratio, result):
+    """Gives every rod of a gripper solved with its body the gripper's outcome."""
+    for r in range(first, first + n_fingers):
+        result.converged[r] = converged
+        result.iterations[r] = iterations
+        result.ratio[r] = ratio
+
+
+@njit(cache=True, error_model="numpy")
+def advance_rods(velocity_old, acceleration_old, step, rods, terms, solver, idle, midpoint, q, velocity, acceleration,
+                 result):
+    """A whole backward-Euler step of rods that move on their own, in one call (the hot path of a scene without
+    an object): :func:`predict` into ``step.q_pred`` and ``q``, :func:`newton` from there, and :func:`finish`; with
+    ``midpoint``, it is the midpoint rule's half step and :func:`midpoint_end` follows. ``idle`` holds the
+    (:class:`Holds`, body arrays, :class:`BodyMotion`, basis) of a scene without an object. Writes the new
+    coordinates, velocities and accelerations (R, N, S) and the Newton results into ``result``."""
+    predict(step.q_old, velocity_old, acceleration_old, step.dt, step.q_pred, q)
+    holds, body, motion, basis = idle
+    every_rod = np.ones(q.shape[0], dtype=np.bool_)
+    newton(q, step, rods, terms, solver, solver.clamp_free, holds, body, motion, basis, every_rod, result)
+    finish(q, step.q_old, velocity_old, step.dt, velocity, acceleration)
+    if midpoint:
+        midpoint_end(step.q_old, velocity_old, q, velocity)
+
+
+
+@njit(cache=True, error_model="numpy")
+def predict(q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
+    """The predictor q_pred = q_old + Δt·v_old of every rod, and Newton's start q_pred + Δt²·a_old, the last step's
+    motion extrapolated (``acceleration_old`` empty: the predictor itself). Arrays (R, N, S)."""
+    for r in range(q_old.shape[0]):
+        _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q_start)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
+    extrapolate = acceleration_old.size > 0
+    for i in range(q_old.shape[1]):
+        for k in range(q_old.shape[2]):
+            q_pred[r, i, k] = q_old[r, i, k] + dt * velocity_old[r, i, k]
+            q_start[r, i, k] = q_pred[r, i, k] + (dt * dt * acceleration_old[r, i, k] if extrapolate else 0.0)
+
+
+@njit(cache=True, error_model="numpy")
+def finish(q, q_old, velocity_old, dt, velocity, acceleration):
+    """The end of a backward-Euler step of every rod: v = (q − q_old)/Δt and the mean acceleration (v − v_old)/Δt."""
+    for r in range(q.shape[0]):
+        _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration):
+    for i in range(q.shape[1]):
+        for k in range(q.shape[2]):
+            velocity[r, i, k] = (q[r, i, k] - q_old[r, i, k]) / dt
+            acceleration[r, i, k] = (velocity[r, i, k] - velocity_old[r, i, k]) / dt
+
+
+@njit(cache=True, error_model="numpy")
+def midpoint_end(q_old, velocity_old, q, velocity):
+    """The implicit midpoint rule's end from its backward-Euler half step (see :mod:`.integrators`), in place:
+    q₁ = 2·q_½ − q₀, v₁ = 2·v_½ − v₀. Arrays (R, N, S)."""
+    for r in range(q.shape[0]):
+        _midpoint_end_rod(r, q_old, velocity_old, q, velocity)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _midpoint_end_rod(r, q_old, velocity_old, q, velocity):
+    for i in range(q.shape[1]):
+        for k in range(q.shape[2]):
+            q[r, i, k] = 2.0 * q[r, i, k] - q_old[r, i, k]
+            velocity[r, i, k] = 2.0 * velocity[r, i, k] - velocity_old[r, i, k]
+
+
+@njit(cache=True, error_model="numpy")
+def per_gripper(converged, iterations, ratio, n_fingers):
+    """A step's per-rod Newton results (R,) per gripper (B,): whether every finger converged, the most iterations,
+    and the largest residual ratio (NaN read as inf)."""
+    n_grippers = converged.size // n_fingers
+    all_converged = np.ones(n_grippers, dtype=np.bool_)
+    most = np.zeros(n_grippers, dtype=np.int64)
+    largest = np.zeros(n_grippers)
+    for b in range(n_grippers):
+        for r in range(b * n_fingers, (b + 1) * n_fingers):
+            all_converged[b] &= converged[r]
+            most[b] = max(most[b], iterations[r])
+            largest[b] = max(largest[b], np.inf if np.isnan(ratio[r]) else ratio[r])
+    return all_converged, most, largest
+
+
+__all__ = ["SolverArrays", "SolveResult", "Holds", "BodyMotion", "MAX_STEP_HALVINGS", "eliminate_rods", "newton",
+           "advance_rods", "predict", "finish", "midpoint_end", "per_gripper"]
