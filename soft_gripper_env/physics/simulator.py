@@ -38,6 +38,7 @@ from .solvers.newton import (
     finish,
     midpoint_end,
     per_gripper,
+    plain,
     predict,
 )
 from .solvers.records import ContactReport, RodState, StepResult, _set, evolve, put_grippers, record, take_grippers
@@ -74,6 +75,8 @@ class BodyModel:
         """The capsule's axis in the body frame (B, 3); any unit vector for a sphere."""
         self.segment = (np.zeros((B, 3)), np.zeros((B, 3)))
         """The object's segment ends relative to its centre, body frame [m], (B, 3) each (zero for a sphere)."""
+        self.plain_arrays = plain(self.arrays())
+        """:meth:`arrays` as plain fields for the kernels' entry points (the same arrays, which :meth:`load` fills)."""
 
     def load(self, index: int, obj) -> None:
         """Sets gripper ``index``'s body to the free :class:`~.scene.objects.Sphere` or
@@ -111,7 +114,7 @@ class BodyModel:
     def palm_reaction(self, c, c_old, orientation, orientation_old, dt) -> np.ndarray:
         """The force of each body on the palm [N], (B, 3), over a step from ``c_old`` to ``c`` of ``dt`` [s]."""
         reaction = np.zeros_like(c)
-        palm_reactions(self.arrays(), c, c_old, orientation, orientation_old, dt, reaction)
+        palm_reactions(self.plain_arrays, c, c_old, orientation, orientation_old, dt, reaction)
         return reaction
 
 
@@ -149,13 +152,14 @@ class Simulator:
         self._integrator = INTEGRATORS[scene.integrator]
         self._subsimulators: dict[int, Simulator] = {}
         self._tolerance_inverse = np.where(disc.free, 1.0 / disc.residual_scale, 0.0)
-        self._per_step_cache: dict[float, SolverArrays] = {}
+        self._per_step_cache: dict[float, tuple] = {}
         self._clamp_free = np.tile(disc.free, (R, 1))
         self._force_tolerance = disc.residual_scale[0]
         """Newton's tolerance on a force DOF, relative_tolerance·EI/L² [N]."""
         self._structure = _structure(scene)
         self._force_terms = ForceTerms.of(disc, scene.forces, scene.fluid)
         self._rods = RodArrays.of(disc)  # 3-D: the frames are the state's, bundled per step (_rod_arrays)
+        self._plain_rods, self._plain_terms = plain(self._rods), plain(self._force_terms)
         self._no_acceleration = np.empty((0, 0, 0))
         moving_water = self._force_terms.drag_normal.size > 0  # only drag feels the current
         self._currents = CurrentBatch(B) if moving_water else None
@@ -182,12 +186,11 @@ class Simulator:
         else:  # rods on their own or against a fixed object: no body moves, and none is held to
             self._geometry = ContactGeometry(np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), directions,
                                              plane_normals, np.empty((0, 6, 6)))
-            self._still_body = (BodyModel(BodyLoads(), 0).arrays(), BodyMotion(
+            self._still_body = (BodyModel(BodyLoads(), 0).plain_arrays, plain(BodyMotion(
                 False, np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3, 3)),
                 BodyState(np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3, 3)), np.empty((0, 3))),
-                np.empty((0, 3))))
-            self._rods_alone = (Holds(np.zeros((R, disc.n_nodes), dtype=bool), np.empty((0, 0, 3)),
-                                self._projection), *self._still_body, self._geometry.any_motion)
+                np.empty((0, 3)))))
+        self._plain_geometry = plain(self._geometry)  # the same arrays: _load and the kernels write into them
         for index, each in enumerate(self.scenes):
             if each is not scene and _structure(each) != self._structure:
                 raise ValueError(f"Simulator.scene[{index}] differs from scene[0] in more than the grasped object's "
@@ -427,8 +430,9 @@ class Simulator:
         release_held(free, held, disc.dim)
         return free
 
-    def _per_step(self, dt: float) -> SolverArrays:
-        """The solvers' settings for steps of ``dt`` (:class:`~.solvers.newton.SolverArrays`): among them the mass
+    def _per_step(self, dt: float) -> tuple:
+        """The solvers' settings for steps of ``dt`` (:class:`~.solvers.newton.SolverArrays`, as plain fields for the
+        kernels, :func:`~.solvers.newton.plain`): among them the mass
         term M/Δt² of every DOF (n,), and 1/tolerance of every DOF of every rod (R, n). The tolerance is the scene's,
         raised where needed above the roundoff of the inertial term M·(q − q_pred)/Δt², which at tiny steps would
         otherwise make it unreachable."""
@@ -438,7 +442,7 @@ class Simulator:
             roundoff = 64.0 * np.finfo(float).eps * mass_term * scene.gripper.finger.length
             tolerance = np.maximum(disc.residual_scale, roundoff)
             force_tolerance, length = self._force_tolerance, scene.gripper.finger.length
-            self._per_step_cache[dt] = SolverArrays(
+            self._per_step_cache[dt] = plain(SolverArrays(
                 mass_term=mass_term, tolerance_inverse=np.tile(np.where(disc.free, 1.0 / tolerance, 0.0),
                                                                (self.n_rods, 1)),
                 clamp_free=self._clamp_free,
@@ -446,7 +450,7 @@ class Simulator:
                 max_iterations=scene.newton.max_iterations, n_fingers=self.n_fingers,
                 max_corrector_iterations=scene.contact.max_corrector_iterations,
                 first_free_node=0 if scene.gripper.finger.clamp == "free" else 2,
-                force_tolerance=float(force_tolerance), finger_length=float(length))
+                force_tolerance=float(force_tolerance), finger_length=float(length)))
         return self._per_step_cache[dt]
 
     def implicit_step(self, state: RodState, natural_curvature: np.ndarray, dt: float, velocity_old: np.ndarray,
@@ -463,21 +467,24 @@ class Simulator:
         q = np.empty((R, N, S))
         velocity, acceleration = np.empty(state.q.shape), np.empty(state.q.shape)
         frames_old = self._frames(state)
-        rods = self._rod_arrays(frames_old)
+        rods = self._plain_rods if frames_old is None else self._plain_rods[:5] + frames_old
         solver = self._per_step(dt)
-        step = StepInputs(q_old, np.empty((R, N, S)), natural_curvature, self._water(state.time)[1], dt)
-        result = SolveResult(np.empty(R, dtype=bool), np.empty(R, dtype=np.int64), np.empty(R),
-                             np.empty((R, disc.n_dofs)), np.zeros(R, dtype=np.int64), np.zeros(R, dtype=bool))
-        held = body = None
+        water = self._water(state.time)[1]
+        held = body = result = None
         end_in_kernel = False
         if not self._has_object:  # rods on their own: the whole step in one kernel
             end_in_kernel = midpoint and frames_old is None  # 3-D frames are carried to the midpoint first
-            advance_rods(v_old, acceleration_old, step, rods, self._force_terms, solver, self._rods_alone,
-                         end_in_kernel, q, velocity.reshape(R, N, S), acceleration.reshape(R, N, S), result)
+            summary = advance_rods(q_old, v_old, acceleration_old, natural_curvature, water, dt, rods,
+                                   self._plain_terms, solver, end_in_kernel, q, velocity.reshape(R, N, S),
+                                   acceleration.reshape(R, N, S))
         else:
+            step = StepInputs(q_old, np.empty((R, N, S)), natural_curvature, water, dt)
+            result = SolveResult(np.empty(R, dtype=bool), np.empty(R, dtype=np.int64), np.empty(R),
+                                 np.empty((R, disc.n_dofs)), np.zeros(R, dtype=np.int64), np.zeros(R, dtype=bool))
             predict(q_old, v_old, acceleration_old, dt, step.q_pred, q)
             held, body = self._solve_with_contact(state, q, step, rods, solver, result)
             finish(q, q_old, v_old, dt, velocity.reshape(R, N, S), acceleration.reshape(R, N, S))
+            summary = per_gripper(result.converged, result.iterations, result.ratio, self.n_fingers)
         if midpoint and not end_in_kernel:
             if frames_old is not None:
                 frames_old = self._transported_frames(q, frames_old)  # to the midpoint, whence to the end
@@ -512,7 +519,7 @@ class Simulator:
                 resolved=~result.changed.reshape(B, F).any(axis=1),
                 palm_reaction=None if body is None else self._body.palm_reaction(
                     body[1], state.body_position, body[3], state.body_orientation, dt))
-        converged, iterations, ratio = per_gripper(result.converged, result.iterations, result.ratio, F)
+        converged, iterations, ratio = summary
         return record(StepResult, state=new_state, converged=converged, newton_iterations=iterations, residual=ratio,
                       contact=contact, substeps=np.full(B, 1))
 
@@ -528,18 +535,19 @@ class Simulator:
         hold_at = step.q_old[..., :D].copy()  # nodes already held stay where they are
         dt = step.dt
         if self._body is None:
-            body, motion = self._still_body
+            body, motion_fields = self._still_body
             holds = Holds(held, np.empty((0, 0, 3)), self._projection)
         else:
             old = BodyState(*(np.ascontiguousarray(x) for x in (state.body_position, state.body_velocity,
                                                                 state.body_orientation,
                                                                 state.body_angular_velocity)))
-            body = self._body.arrays()
+            body = self._body.plain_arrays
             motion = BodyMotion(True, old.position + dt * old.velocity, dt * old.angular_velocity,
                                 np.empty((self.batch_size, 3, 3)), old, self._water(state.time)[0])  # the predictor
+            motion_fields = plain(motion)
             holds = Holds(held, state.hold_offset.reshape(R, N, 3).copy(), self._projection)
-        solve_with_contact(q, step, rods, self._force_terms, solver, holds, hold_at, self._geometry, body, motion,
-                           result)
+        solve_with_contact(q, tuple(step), rods, self._plain_terms, solver, tuple(holds), hold_at,
+                           self._plain_geometry, body, motion_fields, tuple(result))
         if self._body is None:
             return held, None
         c, theta = motion.position, motion.rotation

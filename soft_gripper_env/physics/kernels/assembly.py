@@ -105,7 +105,7 @@ def external_forces(positions, start_positions, velocities, accelerations, water
                             velocity_derivative, acceleration_derivative, stride, force[r], band[r])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def assemble_rod(r, q, step, rods, terms, hessian, force, band, velocity, acceleration):
     """Overwrites ``force`` (N, S) with rod r's total force [N] at coordinates ``q`` (R, N, S) of the backward-Euler
     step ``step`` (:class:`StepInputs`), and ``band`` (n, kd+1) with −∂f/∂q (when ``hessian``); ``velocity`` and

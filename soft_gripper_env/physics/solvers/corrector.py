@@ -25,10 +25,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..kernels.body import body_in_rod_frames, planar_body_basis, turned
+from ..kernels.assembly import RodArrays, StepInputs
+from ..kernels.body import BodyArrays, BodyState, body_in_rod_frames, planar_body_basis, turned
 from ..kernels.contact import find_penetrations, normal_reactions, within_reach
+from ..scene.forces import ForceTerms
 from ..scene.objects import PENETRATION_TOLERANCE
-from .newton import newton
+from .newton import BodyMotion, Holds, SolverArrays, SolveResult, newton
 
 
 class ContactGeometry(NamedTuple):
@@ -60,8 +62,12 @@ def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, b
     ``geometry`` is :class:`ContactGeometry`, ``body`` the bodies' arrays and ``motion``
     (:class:`~.newton.BodyMotion`) the bodies' unknowns (start and solution). Writes per rod the Newton results, the
     corrector's solves and whether the last test still changed the rod's contacts into ``result``
-    (:class:`~.newton.SolveResult`).
+    (:class:`~.newton.SolveResult`). Every bundle arrives as its fields in plain tuples (:func:`~.newton.plain`) and is
+    named again here.
     """
+    step, rods, terms, solver = StepInputs(*step), RodArrays(*rods), ForceTerms(*terms), SolverArrays(*solver)
+    holds, geometry, body, result = Holds(*holds), ContactGeometry(*geometry), BodyArrays(*body), SolveResult(*result)
+    motion = BodyMotion(motion[0], motion[1], motion[2], motion[3], BodyState(*motion[4]), motion[5])
     n_rods, n_nodes, _ = q.shape
     dim = step.water.shape[1]
     n_fingers = solver.n_fingers
@@ -114,7 +120,7 @@ def _hold_in_place(positions, held, hold_at, solve):
                     positions[r, i, d] = hold_at[r, i, d]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shift):
     """After a solve with free bodies: their orientation at the solution, the object as each rod sees it there, and
     its displacement over the step in each rod's coordinates (``shift`` (R, D))."""
@@ -132,7 +138,7 @@ def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shi
                 + projection[r, d, 1] * (c[b, 1] - c_old[b, 1]) + projection[r, d, 2] * (c[b, 2] - c_old[b, 2])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _body_frame_offsets(new_hold, hold_at, holds, motion, n_fingers):
     """The offset of each new hold in its body's frame at the end of the last solve [m], into ``holds.offsets``."""
     projection, orientation, c = holds.projection, motion.orientation, motion.position

@@ -29,9 +29,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..kernels.assembly import assemble_rod
-from ..kernels.body import BodyState, admissible_rotation, body_residual, turned
+from ..kernels.assembly import RodArrays, StepInputs, assemble_rod
+from ..kernels.body import BodyArrays, BodyState, admissible_rotation, body_residual, turned
 from ..kernels.linalg import factor_banded_symmetric, solve_factored
+from ..scene.forces import ForceTerms
 
 
 class SolverArrays(NamedTuple):
@@ -87,6 +88,13 @@ class Holds(NamedTuple):
     """Rod coordinates from world vectors, (R, D, 3)."""
 
 
+def plain(bundle: tuple) -> tuple:
+    """A bundle's fields as plain tuples, all the way down, for a call into a compiled entry point, which names them
+    again (:func:`advance_rods`, :func:`~.corrector.solve_with_contact`). Numba types a plain tuple at every call
+    several times faster than a named one, whose field names it reads each time."""
+    return tuple(plain(value) if isinstance(value, tuple) else value for value in bundle)
+
+
 class BodyMotion(NamedTuple):
     """The grasped bodies' unknowns over a step and what they start from; ``moves`` False for a fixed object (or
     none), whose arrays the solve then leaves alone."""
@@ -110,28 +118,29 @@ MAX_STEP_HALVINGS = 6
 
 
 @njit(cache=True, error_model="numpy")
-def eliminate_rods(band, residual, coupling, free, coupled, active, x0, x_coupling, body_block, body_rhs, factored):
+def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_block, body_rhs, factored):
     """Eliminates each rod's free DOFs from the coupled Newton system.
 
-    ``band`` (R, n, kd+1): the rod's Newton matrix A (overwritten by its factors); ``residual`` (R, n): G;
-    ``coupling`` (R, n, 6): S, the motion of each held DOF per unit body motion (zero on other DOFs); ``free``
-    (R, n): the DOFs solved for. Writes x0 = A_FF⁻¹·G_F (R, n), X = A_FF⁻¹·(A·S)_F (R, n, 6), the rod's part of the
-    body's matrix Sᵀ·A·S − (A·S)_Fᵀ·X into ``body_block`` (R, 6, 6), and (A·S)_Fᵀ·x0 into ``body_rhs`` (R, 6).
+    ``band`` (R, n, kd+1): the rod's Newton matrix A (overwritten by its factors); ``x0`` (R, n): −G, the negated
+    residual, on entry; ``coupling`` (R, n, 6): S, the motion of each held DOF per unit body motion (zero on other
+    DOFs); ``free`` (R, n): the DOFs solved for. Writes x0 = −A_FF⁻¹·G_F, the rod's own Newton step (R, n),
+    X = A_FF⁻¹·(A·S)_F (R, n, 6), the rod's part of the body's matrix Sᵀ·A·S − (A·S)_Fᵀ·X into ``body_block``
+    (R, 6, 6), and (A·S)_Fᵀ·x0 into ``body_rhs`` (R, 6).
     A rod that holds nothing (``coupled`` False, S = 0) only solves for x0, and leaves the other outputs as given
     (zero); a rod that is not ``active`` is left alone. Writes whether each rod's factorisation succeeded into
     ``factored`` and returns the number that failed.
     """
     n_rods, n, kd1 = band.shape
     kd = kd1 - 1
-    product = np.empty((n, 6))
-    column = np.empty(n)
+    product = np.empty((n, 6) if coupled.any() else (0, 6))
+    column = np.empty(n if coupled.any() else 0)
     failures = 0
     for r in range(n_rods):
         if not active[r]:
             continue
         a = band[r]
-        s = coupling[r]
         if coupled[r]:  # Sᵀ·A·S needs A before it is factored
+            s = coupling[r]
             product[:, :] = 0.0  # A·S from the symmetric lower band
             for i in range(n):
                 for j in range(max(0, i - kd), i + 1):
@@ -153,7 +162,6 @@ def eliminate_rods(band, residual, coupling, free, coupled, active, x0, x_coupli
             failures += 1
             x0[r, :] = np.nan
             continue
-        x0[r, :] = residual[r]
         solve_factored(a, x0[r], free[r])
         if not coupled[r]:
             continue
@@ -177,7 +185,7 @@ def eliminate_rods(band, residual, coupling, free, coupled, active, x0, x_coupli
     return failures
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def newton(q, step, rods, terms, solver, free, holds, body, motion, basis, solve, result):
     """Newton's method for the rods where ``solve`` (R,) is True, each gripper at once (see the module notes).
 
@@ -191,7 +199,7 @@ def newton(q, step, rods, terms, solver, free, holds, body, motion, basis, solve
     ``iterations``, ``ratio`` and ``residual`` into ``result`` (:class:`SolveResult`). A rod whose factorisation
     fails stops with ratio inf.
     """
-    work = _new_work(q, step.water.shape[1], solver.n_fingers)
+    work = _new_work(q, step.water.shape[1], solver.n_fingers, motion.moves)
     for b in range(q.shape[0] // solver.n_fingers):
         _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, basis, solve, result, work)
 
@@ -221,36 +229,46 @@ class _NewtonWork(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy")
-def _new_work(q, dim, n_fingers):
+def _new_work(q, dim, n_fingers, coupled):
+    """The work arrays; those only a body's solve uses are empty (and shared) when no body moves."""
     n_nodes, stride = q.shape[1], q.shape[2]
     n = n_nodes * stride
     band_width = 3 * stride - 1
-    return _NewtonWork(np.empty((n_nodes, stride)), np.empty((n_nodes, dim)), np.empty((n_nodes, dim)),
-                       np.empty((n_fingers, n, band_width + 1)), np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)),
-                       np.empty((n_fingers, n, 6)), np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)),
-                       np.zeros((n_fingers, n)), np.empty(n_fingers), np.empty(n_fingers, dtype=np.bool_),
-                       np.zeros(n_fingers, dtype=np.bool_), np.empty(n_fingers, dtype=np.bool_), np.empty(6),
-                       np.empty((6, 6)), np.empty(6), np.empty(6), np.empty((3, 3)))
+    flags = (np.empty(n_fingers), np.empty(n_fingers, dtype=np.bool_), np.zeros(n_fingers, dtype=np.bool_),
+             np.empty(n_fingers, dtype=np.bool_))
+    rods = (np.empty((n_nodes, stride)), np.empty((n_nodes, dim)), np.empty((n_nodes, dim)),
+            np.empty((n_fingers, n, band_width + 1)))
+    if coupled:
+        return _NewtonWork(*rods, np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)), np.empty((n_fingers, n, 6)),
+                           np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)), np.zeros((n_fingers, n)), *flags,
+                           np.empty(6), np.empty((6, 6)), np.empty(6), np.empty(6), np.empty((3, 3)))
+    vector, matrix = np.empty(0), np.empty((0, 0))
+    return _NewtonWork(*rods, np.empty((0, 0, 6)), np.empty((n_fingers, n)), np.empty((0, 0, 6)), np.empty((0, 6, 6)),
+                       np.empty((0, 6)), matrix, *flags, vector, matrix, vector, vector, matrix)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, basis, solve, result, work):
     """Newton's method for gripper b's rods where ``solve`` is True (all of them, and the body, with a free body)."""
+    # arrays taken out of their bundles once: a bundle's member read in a loop costs a reference count each time
+    active, touching, rod_ratio, factored = work.active, work.touching, work.rod_ratio, work.factored
+    converged, iterations_of, ratio = result.converged, result.iterations, result.ratio
+    mass_term, held = solver.mass_term, holds.held
     n_fingers = solver.n_fingers
     first = b * n_fingers
     coupled = motion.moves
     any_rod = False
     for f in range(n_fingers):
-        work.active[f] = coupled or solve[first + f]
+        active[f] = coupled or solve[first + f]
         any_rod |= solve[first + f]
     if not any_rod:
         return
     for f in range(n_fingers):
-        if work.active[f]:
-            result.converged[first + f] = False
-            result.iterations[first + f] = 0
-            result.ratio[first + f] = np.inf
-        work.touching[f] = coupled and holds.held[first + f].any()
+        if active[f]:
+            converged[first + f] = False
+            iterations_of[first + f] = 0
+            ratio[first + f] = np.inf
+        touching[f] = coupled and held[first + f].any()
     gripper_ratio = np.inf
     halvings = 0
     iterations = 0
@@ -263,11 +281,11 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, b
             body_residual(b, body, motion.position, motion.rotation, motion.old, motion.orientation[b], step.dt,
                           motion.water, work.body_residual, work.body_matrix)
         for f in range(n_fingers):
-            if not work.active[f]:
+            if not active[f]:
                 continue
-            if work.touching[f]:
+            if touching[f]:
                 _place_held_nodes(b, first + f, q, holds, motion, work.coupling[f])
-            work.rod_ratio[f], largest = _rod_residual(first + f, q, step, rods, terms, solver, free, result.residual,
+            rod_ratio[f], largest = _rod_residual(first + f, q, step, rods, terms, solver, free, result.residual,
                                                        largest, work, f)
         if coupled:
             largest = _body_residual_in_basis(basis[b], solver.body_tolerance, work.body_residual, work.body_total,
@@ -289,16 +307,17 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, b
         elif not _rods_continue(first, it, solver.max_iterations, result, work):
             return
         for f in range(n_fingers):
-            if work.active[f]:
+            if active[f]:
                 band = work.bands[f]
+                diagonal = band.shape[1] - 1
                 for j in range(band.shape[0]):
-                    band[j, band.shape[1] - 1] += solver.mass_term[j]
+                    band[j, diagonal] += mass_term[j]
         if coupled:
             work.block[:, :, :] = 0.0
             work.rhs[:, :] = 0.0
         rods_in = slice(first, first + n_fingers)
-        failures = eliminate_rods(work.bands, result.residual[rods_in], work.coupling, free[rods_in], work.touching,
-                                  work.active, work.x0, work.x_coupling, work.block, work.rhs, work.factored)
+        failures = eliminate_rods(work.bands, work.coupling, free[rods_in], work.touching, work.active, work.x0,
+                                  work.x_coupling, work.block, work.rhs, work.factored)
         if coupled:
             if failures:
                 gripper_ratio = np.inf
@@ -306,20 +325,20 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, b
             _body_step(b, basis[b], work)
         else:
             for f in range(n_fingers):
-                if work.active[f] and not work.factored[f]:
-                    result.ratio[first + f] = np.inf
-                    work.active[f] = False
+                if active[f] and not factored[f]:
+                    ratio[first + f] = np.inf
+                    active[f] = False
         _apply_step(b, first, q, free, motion, coupled, work)
         iterations += 1
         if not coupled:
             for f in range(n_fingers):
-                if work.active[f]:
-                    result.iterations[first + f] += 1
+                if active[f]:
+                    iterations_of[first + f] += 1
     if coupled:
         _finish_gripper(first, n_fingers, False, iterations, gripper_ratio, result)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _place_held_nodes(b, r, q, holds, motion, coupling):
     """Puts rod r's held nodes on the body, x = P·(c + R·r_h), and writes S = P·[I, −[a]×], the motion of each held
     DOF per unit body motion, into ``coupling`` (n, 6) (zero rows elsewhere)."""
@@ -351,7 +370,7 @@ def _place_held_nodes(b, r, q, holds, motion, coupling):
                                          + projection[d, 2] * cross[2, k])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _rod_residual(r, q, step, rods, terms, solver, free, residual, largest, work, f):
     """Assembles rod r (finger f of its gripper) and writes its residual (n,) into ``residual[r]``, its Newton matrix
     into ``work.bands[f]``; a touching rod's reactions load the body (``work.body_residual``). Returns the rod's
@@ -362,21 +381,25 @@ def _rod_residual(r, q, step, rods, terms, solver, free, residual, largest, work
     q_pred_r = step.q_pred[r].reshape(n)
     force_r = work.force.reshape(n)
     own = 0.0
-    touching = work.touching[f]
+    mass_term, tolerance_inverse = solver.mass_term, solver.tolerance_inverse
+    right_hand_side = work.x0[f]  # the Newton step's, −r
     for j in range(n):
-        residual[r, j] = solver.mass_term[j] * (q_r[j] - q_pred_r[j]) - force_r[j]
-        scaled = abs(residual[r, j]) * solver.tolerance_inverse[r, j] if free[r, j] else 0.0
+        value = mass_term[j] * (q_r[j] - q_pred_r[j]) - force_r[j]
+        residual[r, j] = value
+        right_hand_side[j] = -value
+        scaled = abs(value) * tolerance_inverse[r, j] if free[r, j] else 0.0
         if not scaled <= own:
             own = scaled
         if not scaled <= largest:
             largest = scaled
-        if touching:
+    if work.touching[f]:
+        for j in range(n):
             for k in range(6):
                 work.body_residual[k] += work.coupling[f, j, k] * residual[r, j]
     return own, largest
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _body_residual_in_basis(basis, body_tolerance, own, total, largest):
     """The body's residual ``own`` (6,) in its admissible motions, Bᵀ·own, into ``total``; returns ``largest``
     updated with its scaled entries."""
@@ -390,26 +413,27 @@ def _body_residual_in_basis(basis, body_tolerance, own, total, largest):
     return largest
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _rods_continue(first, it, max_iterations, result, work):
     """For rods on their own: marks the rods that converged (or ran out of iterations) as done; returns whether
     any still iterates."""
     going = False
-    for f in range(work.active.size):
-        if not work.active[f]:
+    active, rod_ratio, ratio, converged = work.active, work.rod_ratio, result.ratio, result.converged
+    for f in range(active.size):
+        if not active[f]:
             continue
         r = first + f
-        result.ratio[r] = work.rod_ratio[f]
-        if work.rod_ratio[f] <= 1.0:
-            result.converged[r] = True
-            work.active[f] = False
+        ratio[r] = rod_ratio[f]
+        if rod_ratio[f] <= 1.0:
+            converged[r] = True
+            active[f] = False
         elif it == max_iterations:
-            work.active[f] = False
-        going |= work.active[f]
+            active[f] = False
+        going |= active[f]
     return going
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _body_step(b, basis, work):
     """The body's Newton step (6,) into ``work.body_step``, from the reduced system Bᵀ·A·B δ = −Bᵀ·G + Bᵀ·Σ rhs
     (A the body's matrix plus the rods' Schur complements; unused columns of B get the identity)."""
@@ -430,7 +454,7 @@ def _body_step(b, basis, work):
         value = -total[k]
         for f in range(work.rhs.shape[0]):
             for i in range(6):
-                value += basis[i, k] * work.rhs[f, i]
+                value -= basis[i, k] * work.rhs[f, i]  # rhs = (A·S)ᵀ·x0 with x0 = −A⁻¹·G
         reduced_rhs[k] = value
         for m in range(6):
             value = 0.0
@@ -445,24 +469,28 @@ def _body_step(b, basis, work):
             step[i] += basis[i, k] * solution[k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _apply_step(b, first, q, free, motion, coupled, work):
-    """Moves every active rod by its Newton step, −x0 − X·δ (δ the body's step, for rods that touch it), and the
+    """Moves every active rod by its Newton step, x0 − X·δ (δ the body's step, for rods that touch it), and the
     body by δ; remembers the rods' steps for the line search."""
-    n = work.x0.shape[1]
-    for f in range(work.active.size):
-        if not work.active[f]:
+    x0, x_coupling, body_step, rod_delta = work.x0, work.x_coupling, work.body_step, work.rod_delta
+    active, touching_rods = work.active, work.touching
+    n = x0.shape[1]
+    for f in range(active.size):
+        if not active[f]:
             continue
         r = first + f
         q_r = q[r].reshape(n)
+        touching = touching_rods[f]
         for j in range(n):
             delta = 0.0
             if free[r, j]:
-                delta = -work.x0[f, j]
-                if work.touching[f]:
+                delta = x0[f, j]
+                if touching:
                     for k in range(6):
-                        delta -= work.x_coupling[f, j, k] * work.body_step[k]
-            work.rod_delta[f, j] = delta
+                        delta -= x_coupling[f, j, k] * body_step[k]
+            if coupled:  # for the line search, which only a body's solve has
+                rod_delta[f, j] = delta
             q_r[j] += delta
     if coupled:
         for k in range(3):
@@ -470,7 +498,7 @@ def _apply_step(b, first, q, free, motion, coupled, work):
             motion.rotation[b, k] += work.body_step[3 + k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _back_off(b, first, q, motion, work, fraction):
     """Takes ``fraction`` of the last Newton step back, rods and body (the line search of a free body's solve)."""
     n = work.rod_delta.shape[1]
@@ -483,7 +511,7 @@ def _back_off(b, first, q, motion, work, fraction):
         motion.rotation[b, k] -= fraction * work.body_step[3 + k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _finish_gripper(first, n_fingers, converged, iterations, ratio, result):
     """Gives every rod of a gripper solved with its body the gripper's outcome."""
     for r in range(first, first + n_fingers):
@@ -493,21 +521,42 @@ def _finish_gripper(first, n_fingers, converged, iterations, ratio, result):
 
 
 @njit(cache=True, error_model="numpy")
-def advance_rods(velocity_old, acceleration_old, step, rods, terms, solver, idle, midpoint, q, velocity, acceleration,
-                 result):
+def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water, dt, rods, terms, solver, midpoint,
+                 q, velocity, acceleration):
     """A whole backward-Euler step of rods that move on their own, in one call (the hot path of a scene without
-    an object): :func:`predict` into ``step.q_pred`` and ``q``, :func:`newton` from there, and :func:`finish`; with
-    ``midpoint``, it is the midpoint rule's half step and :func:`midpoint_end` follows. ``idle`` holds the
-    (:class:`Holds`, body arrays, :class:`BodyMotion`, basis) of a scene without an object. Writes the new
-    coordinates, velocities and accelerations (R, N, S) and the Newton results into ``result``."""
-    predict(step.q_old, velocity_old, acceleration_old, step.dt, step.q_pred, q)
-    holds, body, motion, basis = idle
-    every_rod = np.ones(q.shape[0], dtype=np.bool_)
-    newton(q, step, rods, terms, solver, solver.clamp_free, holds, body, motion, basis, every_rod, result)
-    finish(q, step.q_old, velocity_old, step.dt, velocity, acceleration)
-    if midpoint:
-        midpoint_end(step.q_old, velocity_old, q, velocity)
-
+    an object): for one gripper after another, :func:`predict`, Newton's method from there (:func:`newton`'s loop) and
+    :func:`finish`; with ``midpoint``, it is the midpoint rule's half step and :func:`midpoint_end` follows. Arrays
+    (R, N, S) as in :class:`~..kernels.assembly.StepInputs`; ``acceleration_old`` empty for Newton's start at the
+    predictor. ``rods``, ``terms`` and ``solver`` are the fields of :class:`~..kernels.assembly.RodArrays`,
+    :class:`~..scene.forces.ForceTerms` and :class:`SolverArrays` as plain tuples (:func:`plain`). Writes the new
+    coordinates, velocities and accelerations (R, N, S); returns :func:`per_gripper`'s summary."""
+    rods, terms, solver = RodArrays(*rods), ForceTerms(*terms), SolverArrays(*solver)
+    n_rods, n_nodes, stride = q_old.shape
+    dim = water.shape[1]
+    step = StepInputs(q_old, np.empty(q_old.shape), natural_curvature, water, dt)
+    result = SolveResult(np.zeros(n_rods, dtype=np.bool_), np.zeros(n_rods, dtype=np.int64), np.full(n_rods, np.inf),
+                         np.empty((n_rods, n_nodes * stride)), np.zeros(n_rods, dtype=np.int64),
+                         np.zeros(n_rods, dtype=np.bool_))
+    no_body, no_orientation, none = np.empty((0, 3)), np.empty((0, 3, 3)), np.empty(0)
+    holds = Holds(np.zeros((n_rods, n_nodes), dtype=np.bool_), np.empty((0, 0, 3)), np.empty((0, dim, 3)))
+    body = BodyArrays(none, no_orientation, no_orientation, none, none, none, no_body, no_body, no_body, none, 0.0,
+                      0.0)
+    motion = BodyMotion(False, no_body, no_body, no_orientation,
+                        BodyState(no_body, no_body, no_orientation, no_body), no_body)
+    every_rod = np.ones(n_rods, dtype=np.bool_)
+    work = _new_work(q, dim, solver.n_fingers, False)
+    no_basis = np.empty((0, 6, 6))
+    for b in range(n_rods // solver.n_fingers):  # gripper by gripper, while its rods' arrays are in cache
+        rods_of_b = range(b * solver.n_fingers, (b + 1) * solver.n_fingers)
+        for r in rods_of_b:
+            _predict_rod(r, q_old, velocity_old, acceleration_old, dt, step.q_pred, q)
+        _solve_gripper(b, q, step, rods, terms, solver, solver.clamp_free, holds, body, motion, no_basis, every_rod,
+                       result, work)
+        for r in rods_of_b:
+            _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
+            if midpoint:
+                _midpoint_end_rod(r, q_old, velocity_old, q, velocity)
+    return per_gripper(result.converged, result.iterations, result.ratio, solver.n_fingers)
 
 
 @njit(cache=True, error_model="numpy")
@@ -574,5 +623,5 @@ def per_gripper(converged, iterations, ratio, n_fingers):
     return all_converged, most, largest
 
 
-__all__ = ["SolverArrays", "SolveResult", "Holds", "BodyMotion", "MAX_STEP_HALVINGS", "eliminate_rods", "newton",
-           "advance_rods", "predict", "finish", "midpoint_end", "per_gripper"]
+__all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "BodyMotion", "MAX_STEP_HALVINGS", "eliminate_rods",
+           "newton", "advance_rods", "predict", "finish", "midpoint_end", "per_gripper"]
