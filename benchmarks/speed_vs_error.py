@@ -4,7 +4,7 @@
 
 Scenes (SI):
 
-- ``cantilever_damped``: the cantilever of physics.md §4 (L = 0.1 m, r = 0.01 m, E = 386.66 kPa, ρ = 1200 kg/m³,
+- ``cantilever_damped``: the cantilever of ``docs/model.md`` §4 (L = 0.1 m, r = 0.01 m, E = 386.66 kPa, ρ = 1200 kg/m³,
   accurate clamp) released straight under gravity, with mass-proportional damping γ = 10 s⁻¹, for 2 s;
 - ``cantilever_undamped``: the same without damping;
 - ``paper_ramp``: the paper's three-finger ramp κ̄ = −0.15·t for 1 s (at N = 20; other N keep the curvature per

@@ -1,4 +1,4 @@
-"""Settle the shared cantilever benchmark (physics.md §4) and compare its static tip with the exact elastica.
+"""Settle the shared cantilever benchmark (``docs/model.md`` §4) and compare its static tip with the exact elastica.
 
     python -m examples.cantilever --nodes 20 --clamp accurate [--model planar|3d] [--json out/cantilever.json]
 

@@ -1,4 +1,4 @@
-"""Reproduce the figures of the paper's gripper scene (physics.md §1), one PNG and one tip CSV per case.
+"""Reproduce the figures of the paper's gripper scene (``docs/model.md`` §1), one PNG and one tip CSV per case.
 
     python -m examples.reproduce_paper --out out/paper [--model planar|3d] [--case fig5 fig9 ...]
 

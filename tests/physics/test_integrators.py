@@ -1,4 +1,4 @@
-"""Integrators against a converged reference on the cantilever of physics.md §4, and adaptive substepping."""
+"""Integrators against a converged reference on the cantilever of ``docs/model.md`` §4, and adaptive substepping."""
 
 from dataclasses import replace
 from dataclasses import replace as replace_state

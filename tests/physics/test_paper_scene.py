@@ -1,4 +1,4 @@
-"""Invariants of the paper's scene (physics.md §1): the two rod models agree, the fingers are identical up to
+"""Invariants of the paper's scene (``docs/model.md`` §1): the two rod models agree, the fingers are identical up to
 rotation, the rod barely stretches, Newton converges quickly, and batch members do not influence each other."""
 
 import math

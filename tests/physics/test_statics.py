@@ -79,7 +79,7 @@ def test_shooting_elastica_matches_library_bvp_and_published_value():
     load = finger.material.density * math.pi * finger.radius**2 * 9.81
     stiffness = finger.material.youngs_modulus * math.pi * finger.radius**4 / 4
     assert cantilever_elastica_tip(finger.length, load, stiffness)[1] == pytest.approx(exact, rel=1e-7)
-    assert exact == pytest.approx(-14.95e-3, abs=0.01e-3)  # physics.md §4
+    assert exact == pytest.approx(-14.95e-3, abs=0.01e-3)  # ``docs/model.md`` §4
 
 
 def test_accurate_clamp_within_one_percent_at_20_nodes():
@@ -91,7 +91,7 @@ def test_accurate_clamp_within_one_percent_at_20_nodes():
 def test_paper_clamp_under_deflects_as_documented():
     tip, scene = cantilever_tip_z(20, "paper")
     shortfall = 1 - tip / cantilever_exact_tip_z(scene)
-    assert 0.05 < shortfall < 0.15  # physics.md §4: about 10 % at N = 20
+    assert 0.05 < shortfall < 0.15  # ``docs/model.md`` §4: about 10 % at N = 20
 
 
 def test_accurate_clamp_converges_at_second_order():

@@ -156,7 +156,7 @@ def test_added_mass_lowers_first_mode_frequency():
     expected = math.sqrt(density / (density + WATER_DENSITY))  # m/(m + m_a), same cross-section
     ratio = first_mode_period(air) / first_mode_period(water)
     assert ratio == pytest.approx(expected, rel=0.03)
-    assert 1 / first_mode_period(air) == pytest.approx(5.0, rel=0.15)  # physics.md §4: about 5 Hz
+    assert 1 / first_mode_period(air) == pytest.approx(5.0, rel=0.15)  # ``docs/model.md`` §4: about 5 Hz
 
 
 def test_cross_current_pushes_finger_downstream():

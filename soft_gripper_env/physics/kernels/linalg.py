@@ -23,8 +23,9 @@ def scatter_contiguous(band, offset, hessian, m):
 
 
 @njit(cache=True, error_model="numpy")
-def factor_banded_symmetric(a, free):
+def factor_banded_symmetric(a, free, row_scratch):
     """Factor one rod's band (n, kd+1) in place as L·D·Lᵀ; returns False at a zero or non-finite pivot.
+    ``row_scratch`` (kd+1,) is work space.
 
     Rows and columns of DOFs where ``free`` is False are replaced by the identity first, so that a solve gives them
     no update. A symmetric LDLᵀ factorisation without pivoting: the Newton matrix of an implicit step is dominated by
@@ -38,7 +39,7 @@ def factor_banded_symmetric(a, free):
             a[i, kd] = 1.0
             for k in range(1, min(kd, n - 1 - i) + 1):  # column i below the diagonal
                 a[i + k, kd - k] = 0.0
-    t = np.empty(kd1)
+    t = row_scratch
     for i in range(n):  # row-oriented LDLᵀ: t_k = L[i,k]·d_k, then L[i,k] = t_k/d_k
         j0 = max(0, i - kd)
         row = a[i]
@@ -86,7 +87,7 @@ def solve_factored(a, x, free):
 def solve_banded_symmetric_rod(a, x, free):
     """Solve A·x = b for one rod in place: ``x`` holds b on entry and the solution on return; ``a`` (n, kd+1) is
     overwritten by its factors. Returns False if a pivot was zero or not finite (``x`` is then NaN)."""
-    if not factor_banded_symmetric(a, free):
+    if not factor_banded_symmetric(a, free, np.empty(a.shape[1])):
         x[:] = np.nan
         return False
     solve_factored(a, x, free)

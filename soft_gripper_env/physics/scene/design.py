@@ -57,7 +57,7 @@ class FingerDesign:
     twisting stiffness and lumped mass at node i follow the node's radius; the stretching stiffness of an edge follows
     the mean radius of its two nodes.
 
-    Clamp conventions (``../shared/design/physics.md`` §4):
+    Clamp conventions (``docs/model.md`` §4):
 
     - ``"paper"``: nodes 0 and 1 fixed at s = 0 and s = Δl, first edge rigid, Δl = L/(N − 1). The bending region of
       node 1 starts half an edge beyond the wall, so a cantilever under-deflects by about 10 % at N = 20.

@@ -118,22 +118,22 @@ MAX_STEP_HALVINGS = 6
 
 
 @njit(cache=True, error_model="numpy")
-def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_block, body_rhs, factored):
+def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_block, body_rhs, factored, scratch):
     """Eliminates each rod's free DOFs from the coupled Newton system.
 
     ``band`` (R, n, kd+1): the rod's Newton matrix A (overwritten by its factors); ``x0`` (R, n): −G, the negated
     residual, on entry; ``coupling`` (R, n, 6): S, the motion of each held DOF per unit body motion (zero on other
     DOFs); ``free`` (R, n): the DOFs solved for. Writes x0 = −A_FF⁻¹·G_F, the rod's own Newton step (R, n),
     X = A_FF⁻¹·(A·S)_F (R, n, 6), the rod's part of the body's matrix Sᵀ·A·S − (A·S)_Fᵀ·X into ``body_block``
-    (R, 6, 6), and (A·S)_Fᵀ·x0 into ``body_rhs`` (R, 6).
+    (R, 6, 6), and (A·S)_Fᵀ·x0 into ``body_rhs`` (R, 6). ``scratch`` holds work arrays: A·S (n, 6), a column (n,)
+    and a band row (kd+1,).
     A rod that holds nothing (``coupled`` False, S = 0) only solves for x0, and leaves the other outputs as given
     (zero); a rod that is not ``active`` is left alone. Writes whether each rod's factorisation succeeded into
     ``factored`` and returns the number that failed.
     """
     n_rods, n, kd1 = band.shape
     kd = kd1 - 1
-    product = np.empty((n, 6) if coupled.any() else (0, 6))
-    column = np.empty(n if coupled.any() else 0)
+    product, column, row = scratch
     failures = 0
     for r in range(n_rods):
         if not active[r]:
@@ -157,7 +157,7 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
                     for i in range(n):
                         total += s[i, k] * product[i, m]
                     body_block[r, k, m] = total
-        factored[r] = factor_banded_symmetric(a, free[r])
+        factored[r] = factor_banded_symmetric(a, free[r], row)
         if not factored[r]:
             failures += 1
             x0[r, :] = np.nan
@@ -226,6 +226,9 @@ class _NewtonWork(NamedTuple):
     body_total: np.ndarray
     body_step: np.ndarray
     rotation: np.ndarray
+    product: np.ndarray
+    column: np.ndarray
+    band_row: np.ndarray
 
 
 @njit(cache=True, error_model="numpy")
@@ -241,10 +244,12 @@ def _new_work(q, dim, n_fingers, coupled):
     if coupled:
         return _NewtonWork(*rods, np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)), np.empty((n_fingers, n, 6)),
                            np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)), np.zeros((n_fingers, n)), *flags,
-                           np.empty(6), np.empty((6, 6)), np.empty(6), np.empty(6), np.empty((3, 3)))
-    vector, matrix = np.empty(0), np.empty((0, 0))
-    return _NewtonWork(*rods, np.empty((0, 0, 6)), np.empty((n_fingers, n)), np.empty((0, 0, 6)), np.empty((0, 6, 6)),
-                       np.empty((0, 6)), matrix, *flags, vector, matrix, vector, vector, matrix)
+                           np.empty(6), np.empty((6, 6)), np.empty(6), np.empty(6), np.empty((3, 3)),
+                           np.empty((n, 6)), np.empty(n), np.empty(band_width + 1))
+    vector, matrix, coupling = np.empty(0), np.empty((0, 0)), np.empty((0, 0, 6))
+    return _NewtonWork(*rods, coupling, np.empty((n_fingers, n)), coupling, np.empty((0, 6, 6)), np.empty((0, 6)),
+                       matrix, *flags, vector, matrix, vector, vector, matrix, np.empty((0, 6)), vector,
+                       np.empty(band_width + 1))
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -268,7 +273,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, b
             converged[first + f] = False
             iterations_of[first + f] = 0
             ratio[first + f] = np.inf
-        touching[f] = coupled and held[first + f].any()
+        touching[f] = held[first + f].any() if coupled else False
     gripper_ratio = np.inf
     halvings = 0
     iterations = 0
@@ -316,8 +321,9 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, b
             work.block[:, :, :] = 0.0
             work.rhs[:, :] = 0.0
         rods_in = slice(first, first + n_fingers)
-        failures = eliminate_rods(work.bands, work.coupling, free[rods_in], work.touching, work.active, work.x0,
-                                  work.x_coupling, work.block, work.rhs, work.factored)
+        failures = eliminate_rods(work.bands, work.coupling, free[rods_in], touching, active, work.x0,
+                                  work.x_coupling, work.block, work.rhs, factored,
+                                  (work.product, work.column, work.band_row))
         if coupled:
             if failures:
                 gripper_ratio = np.inf
@@ -537,8 +543,8 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
     result = SolveResult(np.zeros(n_rods, dtype=np.bool_), np.zeros(n_rods, dtype=np.int64), np.full(n_rods, np.inf),
                          np.empty((n_rods, n_nodes * stride)), np.zeros(n_rods, dtype=np.int64),
                          np.zeros(n_rods, dtype=np.bool_))
-    no_body, no_orientation, none = np.empty((0, 3)), np.empty((0, 3, 3)), np.empty(0)
-    holds = Holds(np.zeros((n_rods, n_nodes), dtype=np.bool_), np.empty((0, 0, 3)), np.empty((0, dim, 3)))
+    no_body, no_orientation, none, no_holds = np.empty((0, 3)), np.empty((0, 3, 3)), np.empty(0), np.empty((0, 0, 3))
+    holds = Holds(np.zeros((0, 0), dtype=np.bool_), no_holds, no_holds)  # never read while no body moves
     body = BodyArrays(none, no_orientation, no_orientation, none, none, none, no_body, no_body, no_body, none, 0.0,
                       0.0)
     motion = BodyMotion(False, no_body, no_body, no_orientation,
