@@ -186,10 +186,6 @@ class Simulator:
         else:  # rods on their own or against a fixed object: no body moves, and none is held to
             self._geometry = ContactGeometry(np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), directions,
                                              plane_normals, np.empty((0, 6, 6)))
-            self._still_body = (BodyModel(BodyLoads(), 0).plain_arrays, plain(BodyMotion(
-                False, np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3, 3)),
-                BodyState(np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3, 3)), np.empty((0, 3))),
-                np.empty((0, 3)))))
         self._plain_geometry = plain(self._geometry)  # the same arrays: _load and the kernels write into them
         for index, each in enumerate(self.scenes):
             if each is not scene and _structure(each) != self._structure:
@@ -535,19 +531,19 @@ class Simulator:
         hold_at = step.q_old[..., :D].copy()  # nodes already held stay where they are
         dt = step.dt
         if self._body is None:
-            body, motion_fields = self._still_body
+            free_body = None
             holds = Holds(held, np.empty((0, 0, 3)), self._projection)
         else:
             old = BodyState(*(np.ascontiguousarray(x) for x in (state.body_position, state.body_velocity,
                                                                 state.body_orientation,
                                                                 state.body_angular_velocity)))
             body = self._body.plain_arrays
-            motion = BodyMotion(True, old.position + dt * old.velocity, dt * old.angular_velocity,
+            motion = BodyMotion(old.position + dt * old.velocity, dt * old.angular_velocity,
                                 np.empty((self.batch_size, 3, 3)), old, self._water(state.time)[0])  # the predictor
-            motion_fields = plain(motion)
+            free_body = (body, plain(motion))
             holds = Holds(held, state.hold_offset.reshape(R, N, 3).copy(), self._projection)
         solve_with_contact(q, tuple(step), rods, self._plain_terms, solver, tuple(holds), hold_at,
-                           self._plain_geometry, body, motion_fields, tuple(result))
+                           self._plain_geometry, free_body, tuple(result))
         if self._body is None:
             return held, None
         c, theta = motion.position, motion.rotation

@@ -30,7 +30,7 @@ from ..kernels.body import BodyArrays, BodyState, body_in_rod_frames, planar_bod
 from ..kernels.contact import find_penetrations, normal_reactions, within_reach
 from ..scene.forces import ForceTerms
 from ..scene.objects import PENETRATION_TOLERANCE
-from .newton import BodyMotion, Holds, SolverArrays, SolveResult, newton
+from .newton import BodyCoupling, BodyMotion, Holds, SolverArrays, SolveResult, newton
 
 
 class ContactGeometry(NamedTuple):
@@ -53,26 +53,36 @@ class ContactGeometry(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy")
-def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, body, motion, result):
+def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result):
     """The predictor–corrector for every gripper of a batch (see the module notes).
 
     ``q`` (R, N, S) holds Newton's start and receives the solution; ``holds`` (:class:`~.newton.Holds`) the holds at
     the start of the step (``held`` (R, N), and for a free body their ``offsets``), updated in place; ``hold_at``
     (R, N, D) where each held node is held in its rod's coordinates, the start of the step's positions on entry.
-    ``geometry`` is :class:`ContactGeometry`, ``body`` the bodies' arrays and ``motion``
-    (:class:`~.newton.BodyMotion`) the bodies' unknowns (start and solution). Writes per rod the Newton results, the
-    corrector's solves and whether the last test still changed the rod's contacts into ``result``
-    (:class:`~.newton.SolveResult`). Every bundle arrives as its fields in plain tuples (:func:`~.newton.plain`) and is
-    named again here.
+    ``geometry`` is :class:`ContactGeometry`; ``free_body`` None for a fixed object, else the bodies' arrays
+    (:class:`~..kernels.body.BodyArrays`) and their unknowns (:class:`~.newton.BodyMotion`, start and solution).
+    Writes per rod the Newton results, the corrector's solves and whether the last test still changed the rod's
+    contacts into ``result`` (:class:`~.newton.SolveResult`). Every bundle arrives as its fields in plain tuples
+    (:func:`~.newton.plain`) and is named again here; the loop is compiled apart for fixed and free objects.
     """
     step, rods, terms, solver = StepInputs(*step), RodArrays(*rods), ForceTerms(*terms), SolverArrays(*solver)
-    holds, geometry, body, result = Holds(*holds), ContactGeometry(*geometry), BodyArrays(*body), SolveResult(*result)
-    motion = BodyMotion(motion[0], motion[1], motion[2], motion[3], BodyState(*motion[4]), motion[5])
+    holds, geometry, result = Holds(*holds), ContactGeometry(*geometry), SolveResult(*result)
+    if free_body is None:
+        _correct(q, step, rods, terms, solver, holds, hold_at, geometry, None, result)
+    else:
+        body, motion = free_body
+        moving = (BodyArrays(*body), BodyMotion(motion[0], motion[1], motion[2], BodyState(*motion[3]), motion[4]))
+        _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result):
+    """The corrector's loop; ``moving`` is None for a fixed object, else (bodies, their motion), and every branch
+    on the body tests it, so that a fixed object's loop is compiled without them."""
     n_rods, n_nodes, _ = q.shape
     dim = step.water.shape[1]
     n_fingers = solver.n_fingers
     held = holds.held
-    moves = motion.moves
     starts, ends, radii = geometry.starts, geometry.ends, geometry.radii
     solve = np.ones(n_rods, dtype=np.bool_)
     free = np.empty_like(solver.clamp_free)
@@ -86,22 +96,21 @@ def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, b
     for k in range(solver.max_corrector_iterations + n_nodes + 1):  # holds-only solves end by N
         free[:, :] = solver.clamp_free
         release_held(free, held, dim)
-        if moves:
+        if moving is not None:
             basis = geometry.any_motion if dim == 3 else planar_body_basis(held, geometry.plane_normals)
+            newton(q, step, rods, terms, solver, free, BodyCoupling(holds, moving[0], moving[1], basis), solve, result)
+            _body_at_solution(step, solver, holds, geometry, moving[0], moving[1], rotation, shift)
         else:  # a fixed object's holds stay where they were held; solved from the last solution, warm
-            basis = geometry.any_motion
             _hold_in_place(positions, held, hold_at, solve)
-        newton(q, step, rods, terms, solver, free, holds, body, motion, basis, solve, result)
-        if moves:
-            _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shift)
+            newton(q, step, rods, terms, solver, free, None, solve, result)
         searched = within_reach(starts, ends, radii, solver.finger_length)
         contact_changes(positions, old_positions, result.residual, held, starts, ends, radii, searched, shift,
                         solver.first_free_node, solver.force_tolerance, adhesive, new_hold, hold_at, result.changed)
         within_budget = k < solver.max_corrector_iterations
         if not corrector_continues(within_budget, new_hold, result.changed, solve):
             break
-        if moves:
-            _body_frame_offsets(new_hold, hold_at, holds, motion, n_fingers)
+        if moving is not None:
+            _body_frame_offsets(new_hold, hold_at, holds, moving[1], n_fingers)
         update_holds(within_budget, held, adhesive, new_hold)
         for r in range(n_rods):
             if solve[r]:

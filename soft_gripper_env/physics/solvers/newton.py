@@ -96,10 +96,8 @@ def plain(bundle: tuple) -> tuple:
 
 
 class BodyMotion(NamedTuple):
-    """The grasped bodies' unknowns over a step and what they start from; ``moves`` False for a fixed object (or
-    none), whose arrays the solve then leaves alone."""
+    """The free bodies' unknowns over a step and what they start from."""
 
-    moves: bool
     position: np.ndarray
     """The centre c at the end of the step [m], (B, 3): Newton's start on entry, the solution on return."""
     rotation: np.ndarray
@@ -110,6 +108,18 @@ class BodyMotion(NamedTuple):
     """The bodies at the start of the step (:class:`~..kernels.body.BodyState`)."""
     water: np.ndarray
     """The current at each body [m/s], (B, 3)."""
+
+
+class BodyCoupling(NamedTuple):
+    """What couples a gripper's rods to a free body in Newton's method. Where no body moves (rods on their own, or
+    held on a fixed object) the solvers get None instead, and compile the loop without the body's code."""
+
+    holds: Holds
+    body: BodyArrays
+    """The bodies (:class:`~..kernels.body.BodyArrays`)."""
+    motion: BodyMotion
+    basis: np.ndarray
+    """The bodies' admissible motions, (B, 6, 6) (zero columns unused)."""
 
 
 MAX_STEP_HALVINGS = 6
@@ -186,22 +196,21 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def newton(q, step, rods, terms, solver, free, holds, body, motion, basis, solve, result):
+def newton(q, step, rods, terms, solver, free, coupling, solve, result):
     """Newton's method for the rods where ``solve`` (R,) is True, each gripper at once (see the module notes).
 
     ``q`` (R, N, S) holds the start and receives the solution; only DOFs where ``free`` (R, n) is True move. With the
     residual r = M·(q − q_pred)/Δt² − f, a rod (or, with a free body, a gripper, whose rods are then all solved) has
     converged when its largest |r|·tolerance_inverse over free DOFs, and the body's residual over its tolerance, is
     ≤ 1. ``step`` is :class:`~..kernels.assembly.StepInputs`, ``rods`` :class:`~..kernels.assembly.RodArrays`,
-    ``terms`` the scene's :class:`~..scene.forces.ForceTerms`, ``solver`` :class:`SolverArrays`, ``holds``
-    :class:`Holds`, ``body`` :class:`~..kernels.body.BodyArrays`, ``motion`` :class:`BodyMotion` and ``basis``
-    (B, 6, 6) the free bodies' admissible motions (zero columns unused). Writes every solved rod's ``converged``,
+    ``terms`` the scene's :class:`~..scene.forces.ForceTerms`, ``solver`` :class:`SolverArrays`, ``coupling`` a
+    :class:`BodyCoupling` with free bodies, else None. Writes every solved rod's ``converged``,
     ``iterations``, ``ratio`` and ``residual`` into ``result`` (:class:`SolveResult`). A rod whose factorisation
     fails stops with ratio inf.
     """
-    work = _new_work(q, step.water.shape[1], solver.n_fingers, motion.moves)
+    work = _new_work(q, step.water.shape[1], solver.n_fingers, coupling is not None)
     for b in range(q.shape[0] // solver.n_fingers):
-        _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, basis, solve, result, work)
+        _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, result, work)
 
 
 class _NewtonWork(NamedTuple):
@@ -253,15 +262,15 @@ def _new_work(q, dim, n_fingers, coupled):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, basis, solve, result, work):
+def _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, result, work):
     """Newton's method for gripper b's rods where ``solve`` is True (all of them, and the body, with a free body)."""
     # arrays taken out of their bundles once: a bundle's member read in a loop costs a reference count each time
     active, touching, rod_ratio, factored = work.active, work.touching, work.rod_ratio, work.factored
     converged, iterations_of, ratio = result.converged, result.iterations, result.ratio
-    mass_term, held = solver.mass_term, holds.held
+    mass_term = solver.mass_term
     n_fingers = solver.n_fingers
     first = b * n_fingers
-    coupled = motion.moves
+    coupled = coupling is not None  # every branch on the body tests ``coupling`` itself, so None prunes them
     any_rod = False
     for f in range(n_fingers):
         active[f] = coupled or solve[first + f]
@@ -273,28 +282,32 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, b
             converged[first + f] = False
             iterations_of[first + f] = 0
             ratio[first + f] = np.inf
-        touching[f] = held[first + f].any() if coupled else False
+        touching[f] = False
+        if coupling is not None:
+            touching[f] = coupling.holds.held[first + f].any()
     gripper_ratio = np.inf
     halvings = 0
     iterations = 0
-    if coupled:
-        admissible_rotation(basis[b], motion.rotation[b])  # Newton's start, as Newton's steps, within the basis
+    if coupling is not None:  # Newton's start, as Newton's steps, within the basis
+        admissible_rotation(coupling.basis[b], coupling.motion.rotation[b])
     for it in range(solver.max_iterations + 1):
         largest = 0.0
-        if coupled:
+        if coupling is not None:
+            motion = coupling.motion
             turned(motion.rotation[b], motion.old.orientation[b], work.rotation, motion.orientation[b])
-            body_residual(b, body, motion.position, motion.rotation, motion.old, motion.orientation[b], step.dt,
-                          motion.water, work.body_residual, work.body_matrix)
+            body_residual(b, coupling.body, motion.position, motion.rotation, motion.old, motion.orientation[b],
+                          step.dt, motion.water, work.body_residual, work.body_matrix)
         for f in range(n_fingers):
             if not active[f]:
                 continue
-            if touching[f]:
-                _place_held_nodes(b, first + f, q, holds, motion, work.coupling[f])
+            if coupling is not None:
+                if touching[f]:
+                    _place_held_nodes(b, first + f, q, coupling.holds, coupling.motion, work.coupling[f])
             rod_ratio[f], largest = _rod_residual(first + f, q, step, rods, terms, solver, free, result.residual,
-                                                       largest, work, f)
-        if coupled:
-            largest = _body_residual_in_basis(basis[b], solver.body_tolerance, work.body_residual, work.body_total,
-                                              largest)
+                                                  largest, work, f)
+        if coupling is not None:
+            largest = _body_residual_in_basis(coupling.basis[b], solver.body_tolerance, work.body_residual,
+                                              work.body_total, largest)
             if largest <= 1.0:
                 gripper_ratio = largest
                 _finish_gripper(first, n_fingers, True, iterations, gripper_ratio, result)
@@ -303,7 +316,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, b
                 # the last step made the residual worse (a new hold far from the body can throw Newton off): go
                 # back and take half of it
                 halvings += 1
-                _back_off(b, first, q, motion, work, 0.5**halvings)
+                _back_off(b, first, q, coupling.motion, work, 0.5**halvings)
                 continue
             gripper_ratio = largest
             halvings = 0
@@ -317,24 +330,24 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, body, motion, b
                 diagonal = band.shape[1] - 1
                 for j in range(band.shape[0]):
                     band[j, diagonal] += mass_term[j]
-        if coupled:
+        if coupling is not None:
             work.block[:, :, :] = 0.0
             work.rhs[:, :] = 0.0
         rods_in = slice(first, first + n_fingers)
         failures = eliminate_rods(work.bands, work.coupling, free[rods_in], touching, active, work.x0,
                                   work.x_coupling, work.block, work.rhs, factored,
                                   (work.product, work.column, work.band_row))
-        if coupled:
+        if coupling is not None:
             if failures:
                 gripper_ratio = np.inf
                 break
-            _body_step(b, basis[b], work)
+            _body_step(b, coupling.basis[b], work)
         else:
             for f in range(n_fingers):
                 if active[f] and not factored[f]:
                     ratio[first + f] = np.inf
                     active[f] = False
-        _apply_step(b, first, q, free, motion, coupled, work)
+        _apply_step(b, first, q, free, coupling, work)
         iterations += 1
         if not coupled:
             for f in range(n_fingers):
@@ -476,7 +489,7 @@ def _body_step(b, basis, work):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _apply_step(b, first, q, free, motion, coupled, work):
+def _apply_step(b, first, q, free, coupling, work):
     """Moves every active rod by its Newton step, x0 − X·δ (δ the body's step, for rods that touch it), and the
     body by δ; remembers the rods' steps for the line search."""
     x0, x_coupling, body_step, rod_delta = work.x0, work.x_coupling, work.body_step, work.rod_delta
@@ -495,13 +508,13 @@ def _apply_step(b, first, q, free, motion, coupled, work):
                 if touching:
                     for k in range(6):
                         delta -= x_coupling[f, j, k] * body_step[k]
-            if coupled:  # for the line search, which only a body's solve has
+            if coupling is not None:  # for the line search, which only a body's solve has
                 rod_delta[f, j] = delta
             q_r[j] += delta
-    if coupled:
+    if coupling is not None:
         for k in range(3):
-            motion.position[b, k] += work.body_step[k]
-            motion.rotation[b, k] += work.body_step[3 + k]
+            coupling.motion.position[b, k] += work.body_step[k]
+            coupling.motion.rotation[b, k] += work.body_step[3 + k]
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -543,21 +556,13 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
     result = SolveResult(np.zeros(n_rods, dtype=np.bool_), np.zeros(n_rods, dtype=np.int64), np.full(n_rods, np.inf),
                          np.empty((n_rods, n_nodes * stride)), np.zeros(n_rods, dtype=np.int64),
                          np.zeros(n_rods, dtype=np.bool_))
-    no_body, no_orientation, none, no_holds = np.empty((0, 3)), np.empty((0, 3, 3)), np.empty(0), np.empty((0, 0, 3))
-    holds = Holds(np.zeros((0, 0), dtype=np.bool_), no_holds, no_holds)  # never read while no body moves
-    body = BodyArrays(none, no_orientation, no_orientation, none, none, none, no_body, no_body, no_body, none, 0.0,
-                      0.0)
-    motion = BodyMotion(False, no_body, no_body, no_orientation,
-                        BodyState(no_body, no_body, no_orientation, no_body), no_body)
     every_rod = np.ones(n_rods, dtype=np.bool_)
     work = _new_work(q, dim, solver.n_fingers, False)
-    no_basis = np.empty((0, 6, 6))
     for b in range(n_rods // solver.n_fingers):  # gripper by gripper, while its rods' arrays are in cache
         rods_of_b = range(b * solver.n_fingers, (b + 1) * solver.n_fingers)
         for r in rods_of_b:
             _predict_rod(r, q_old, velocity_old, acceleration_old, dt, step.q_pred, q)
-        _solve_gripper(b, q, step, rods, terms, solver, solver.clamp_free, holds, body, motion, no_basis, every_rod,
-                       result, work)
+        _solve_gripper(b, q, step, rods, terms, solver, solver.clamp_free, None, every_rod, result, work)
         for r in rods_of_b:
             _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
             if midpoint:
@@ -629,5 +634,5 @@ def per_gripper(converged, iterations, ratio, n_fingers):
     return all_converged, most, largest
 
 
-__all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "BodyMotion", "MAX_STEP_HALVINGS", "eliminate_rods",
-           "newton", "advance_rods", "predict", "finish", "midpoint_end", "per_gripper"]
+__all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "BodyMotion", "BodyCoupling", "MAX_STEP_HALVINGS",
+           "eliminate_rods", "newton", "advance_rods", "predict", "finish", "midpoint_end", "per_gripper"]
