@@ -123,9 +123,11 @@ def main(argv: list[str] | None = None) -> dict:
     fig, ax = plt.subplots(figsize=(8, 0.45 * len(rows) + 1.5))
     labels = [row["measurement"] for row in rows]
     ratios = [row["speed_ratio"] for row in rows]
-    ax.barh(labels, ratios, color=["tab:green" if r >= 0.95 else "tab:red" for r in ratios])
+    bars = ax.barh(labels, ratios, color=["tab:green" if r >= 0.95 else "tab:red" for r in ratios])
+    ax.bar_label(bars, fmt="%.3f×", padding=3, fontsize=8)
     ax.axvline(1.0, color="k", lw=1)
     ax.axvline(0.95, color="0.5", ls="--", lw=1, label="5 % slower")
+    ax.set_xlim(min(0.8, min(ratios) - 0.05), max(1.15, max(ratios) + 0.1))
     ax.set_xlabel(f"speed of this tree / speed of {base_commit[:10]} (same run)")
     ax.invert_yaxis()
     ax.legend(loc="lower right", fontsize=8)
