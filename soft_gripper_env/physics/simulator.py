@@ -585,8 +585,9 @@ def run_ramp(scene: Scene, batch_size: int = 1, progress: Callable[[int, int], N
     positions = [sim.world_positions(state)]
     iterations, converged, contacts = [], [], []
     for k in range(n_steps):
-        kbar = min(max(scene.natural_curvature_rate * state.time, -NATURAL_CURVATURE_LIMIT), NATURAL_CURVATURE_LIMIT)
-        result = sim.step(state, kbar)
+        natural_curvature = min(max(scene.natural_curvature_rate * state.time, -NATURAL_CURVATURE_LIMIT),
+                                NATURAL_CURVATURE_LIMIT)
+        result = sim.step(state, natural_curvature)
         state = result.state
         positions.append(sim.world_positions(state))
         iterations.append(result.newton_iterations)

@@ -18,7 +18,12 @@ from soft_gripper_env.physics import (
     paper_scene,
     run_ramp,
 )
-from soft_gripper_env.physics.kernels.contact import reachable
+from soft_gripper_env.physics.kernels.contact import object_in_rod_frames, within_reach
+
+
+def reachable(obj, finger_directions, length, planar):
+    """Which fingers the corrector searches for contact with ``obj``."""
+    return within_reach(*object_in_rod_frames(obj, finger_directions, planar), length)
 
 
 def segment_distance(points, start, end):

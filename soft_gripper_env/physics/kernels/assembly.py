@@ -53,12 +53,10 @@ class RodArrays(NamedTuple):
     """Start-of-step reference twist at every node [rad], (R, N); (0, 0) in the planar model."""
 
     @classmethod
-    def of(cls, disc: Discretization, frames=None) -> RodArrays:
-        """The arrays of ``disc`` with the 3-D ``frames`` (tangent, director, reference twist), or none."""
-        if frames is None:
-            frames = (np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))
+    def of(cls, disc: Discretization) -> RodArrays:
+        """The arrays of ``disc``, without frames (a state's are put in with ``_replace``)."""
         return cls(disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness, disc.twist_stiffness,
-                   disc.voronoi_length, *frames)
+                   disc.voronoi_length, np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))
 
 
 class StepInputs(NamedTuple):

@@ -56,12 +56,6 @@ def normal_reactions(positions, reactions, starts, ends):
     return normal
 
 
-def reachable(obj: GraspedObject, finger_directions: np.ndarray, length: float, planar: bool) -> np.ndarray:
-    """Which fingers can touch the object at all, (F,) bool: those whose base (the palm centre) lies within L + R
-    of the object's segment, as the rod sees it. Contact is never searched for the others."""
-    return within_reach(*object_in_rod_frames(obj, finger_directions, planar), length)
-
-
 @njit(cache=True, error_model="numpy")
 def within_reach(starts, ends, radii, length):
     """Which rods (R,) can touch an object given as they see it (segment ends (R, D), radius (R,)): the object
@@ -142,4 +136,4 @@ def find_penetrations(positions, old_positions, shifts, starts, ends, radii, hel
     return found
 
 
-__all__ = ["object_in_rod_frames", "normal_reactions", "reachable", "within_reach", "find_penetrations"]
+__all__ = ["object_in_rod_frames", "normal_reactions", "within_reach", "find_penetrations"]
