@@ -13,11 +13,27 @@ is a distance d from the plane is a circle of radius √(R² − d²) there.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from ..scene.objects import GraspedObject
+
+
+class ObjectView(NamedTuple):
+    """The grasped object as each rod sees it, in the rod's coordinates (R rods, D coordinates)."""
+
+    starts: np.ndarray
+    """One end of the object's segment [m], (R, D)."""
+    ends: np.ndarray
+    """The other end [m], (R, D)."""
+    radii: np.ndarray
+    """The object's radius as the rod sees it [m], (R,)."""
+    searched: np.ndarray
+    """Whether the rod can reach the object at all, (R,) bool (:func:`within_reach`)."""
+    shift: np.ndarray
+    """The object's displacement over the step [m], (R, D); zero for a fixed object."""
 
 
 def object_in_rod_frames(obj: GraspedObject, finger_directions: np.ndarray,
@@ -88,14 +104,14 @@ def _distance_to_segment(point, start, end, nearest):
 
 
 @njit(cache=True, error_model="numpy")
-def find_penetrations(positions, old_positions, shifts, starts, ends, radii, held, searched, first_free_node,
-                      tolerance, new_hold, hold_at):
-    """Marks in ``new_hold`` (R, N) every free node of a searched rod that lies inside its object (the points within
-    ``radii`` of the segment ``starts``–``ends``, (R, D) each) by more than ``tolerance`` [m], and writes where it is
-    held into ``hold_at`` (R, N, D): the point where its path over the step, relative to the object, entered the
-    surface. ``old_positions`` (R, N, D) are the nodes at the start of the step and ``shifts`` (R, D) the object's
-    displacement over it. A node already inside at the start is projected radially instead. Returns the number found
-    per rod."""
+def find_penetrations(positions, old_positions, view, held, first_free_node, tolerance, new_hold, hold_at):
+    """Marks in ``new_hold`` (R, N) every free node from ``first_free_node`` on of a searched rod that lies inside its
+    object (``view``, :class:`ObjectView`: the points within ``radii`` of the segment ``starts``–``ends``) by more
+    than ``tolerance`` [m], and writes where it is held into ``hold_at`` (R, N, D): the point where its path over the
+    step, relative to the object, entered the surface. ``old_positions`` (R, N, D) are the nodes at the start of the
+    step and ``view.shift`` (R, D) the object's displacement over it. A node already inside at the start is
+    projected radially instead. Returns the number found per rod."""
+    starts, ends, radii, searched, shifts = view
     n_rods, n_nodes, dim = positions.shape
     found = np.zeros(n_rods, dtype=np.int64)
     nearest = np.empty(dim)
@@ -136,4 +152,4 @@ def find_penetrations(positions, old_positions, shifts, starts, ends, radii, hel
     return found
 
 
-__all__ = ["object_in_rod_frames", "normal_reactions", "within_reach", "find_penetrations"]
+__all__ = ["ObjectView", "object_in_rod_frames", "normal_reactions", "within_reach", "find_penetrations"]

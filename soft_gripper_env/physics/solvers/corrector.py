@@ -27,7 +27,7 @@ from numba import njit
 
 from ..kernels.assembly import RodArrays, StepInputs
 from ..kernels.body import BodyArrays, BodyState, body_in_rod_frames, planar_body_basis, turned
-from ..kernels.contact import find_penetrations, normal_reactions, within_reach
+from ..kernels.contact import ObjectView, find_penetrations, normal_reactions, within_reach
 from ..scene.forces import ForceTerms
 from ..scene.objects import PENETRATION_TOLERANCE
 from .newton import BodyCoupling, BodyMotion, Holds, SolverArrays, SolveResult, newton
@@ -50,6 +50,19 @@ class ContactGeometry(NamedTuple):
     any_motion: np.ndarray
     """A 3-D free body's admissible motions, the identity per gripper (B, 6, 6); empty for planar fingers, whose
     basis depends on the holds (:func:`~..kernels.body.planar_body_basis`)."""
+
+
+class ContactChanges(NamedTuple):
+    """What the corrector's test finds after a solve."""
+
+    adhesive: np.ndarray
+    """Holds whose normal reaction pulls, (R, N) bool."""
+    new_hold: np.ndarray
+    """Free nodes inside the object, (R, N) bool."""
+    hold_at: np.ndarray
+    """Where each node is held, in its rod's coordinates [m], (R, N, D); written for the new holds."""
+    changed: np.ndarray
+    """Rods with either, (R,) bool."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -90,6 +103,7 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
     shift = np.zeros((n_rods, dim))
     new_hold = np.empty((n_rods, n_nodes), dtype=np.bool_)
     adhesive = np.empty((n_rods, n_nodes), dtype=np.bool_)
+    changes = ContactChanges(adhesive, new_hold, hold_at, result.changed)
     positions, old_positions = q[:, :, :dim], step.q_old[:, :, :dim]
     result.corrector[:] = 0
     result.residual[:, :] = 0.0
@@ -103,9 +117,8 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
         else:  # a fixed object's holds stay where they were held; solved from the last solution, warm
             _hold_in_place(positions, held, hold_at, solve)
             newton(q, step, rods, terms, solver, free, None, solve, result)
-        searched = within_reach(starts, ends, radii, solver.finger_length)
-        contact_changes(positions, old_positions, result.residual, held, starts, ends, radii, searched, shift,
-                        solver.first_free_node, solver.force_tolerance, adhesive, new_hold, hold_at, result.changed)
+        view = ObjectView(starts, ends, radii, within_reach(starts, ends, radii, solver.finger_length), shift)
+        contact_changes(positions, old_positions, result.residual, held, view, solver, changes)
         within_budget = k < solver.max_corrector_iterations
         if not corrector_continues(within_budget, new_hold, result.changed, solve):
             break
@@ -168,14 +181,16 @@ def _body_frame_offsets(new_hold, hold_at, holds, motion, n_fingers):
 
 
 @njit(cache=True, error_model="numpy")
-def contact_changes(positions, old_positions, residual, held, starts, ends, radii, searched, shifts, first_free_node,
-                    force_tolerance, adhesive, new_hold, hold_at, changed):
+def contact_changes(positions, old_positions, residual, held, view, solver, changes):
     """The corrector's test after a solve, for rods whose nodes are at ``positions`` (R, N, D) and whose residual
-    (R, n) holds the reactions on held DOFs: marks in ``adhesive`` (R, N) the holds whose normal reaction pulls by
-    more than ``force_tolerance`` [N] (a reaction is known to Newton's tolerance: one pulling by less is zero, and
-    releasing it would only make the corrector cycle), in ``new_hold`` (R, N) the free nodes that penetrate the
-    object, with their hold points in ``hold_at`` (:func:`find_penetrations`), and in ``changed`` (R,) the rods with
-    either."""
+    (R, n) holds the reactions on held DOFs, against the object as each rod sees it (``view``,
+    :class:`~..kernels.contact.ObjectView`). Marks in ``changes.adhesive`` (R, N) the holds whose normal reaction
+    pulls by more than Newton's force tolerance ``solver.force_tolerance`` [N] (a reaction is known to that
+    tolerance: one pulling by less is zero, and releasing it would only make the corrector cycle), in
+    ``changes.new_hold`` (R, N) the free nodes that penetrate the object, with their hold points in
+    ``changes.hold_at`` (:func:`~..kernels.contact.find_penetrations`), and in ``changes.changed`` (R,) the rods
+    with either (:class:`ContactChanges`)."""
+    adhesive, new_hold, changed = changes.adhesive, changes.new_hold, changes.changed
     n_rods, n_nodes, dim = positions.shape
     stride = residual.shape[1] // n_nodes
     reaction = np.zeros((n_rods, n_nodes, dim))
@@ -184,10 +199,11 @@ def contact_changes(positions, old_positions, residual, held, starts, ends, radi
             if held[r, i]:
                 for d in range(dim):
                     reaction[r, i, d] = residual[r, stride * i + d]
-    normal = normal_reactions(positions, reaction, starts, ends)
+    normal = normal_reactions(positions, reaction, view.starts, view.ends)
     new_hold[:, :] = False
-    found = find_penetrations(positions, old_positions, shifts, starts, ends, radii, held, searched, first_free_node,
-                              PENETRATION_TOLERANCE, new_hold, hold_at)
+    found = find_penetrations(positions, old_positions, view, held, solver.first_free_node, PENETRATION_TOLERANCE,
+                              new_hold, changes.hold_at)
+    force_tolerance = solver.force_tolerance
     for r in range(n_rods):
         changed[r] = found[r] > 0
         for i in range(n_nodes):
