@@ -478,7 +478,7 @@ class Simulator:
             result = SolveResult(np.empty(R, dtype=bool), np.empty(R, dtype=np.int64), np.empty(R),
                                  np.empty((R, disc.n_dofs)), np.zeros(R, dtype=np.int64), np.zeros(R, dtype=bool))
             predict(q_old, v_old, acceleration_old, dt, step.q_pred, q)
-            held, body = self._solve_with_contact(state, q, step, rods, solver, result)
+            held, body = self._run_corrector(state, q, step, rods, solver, result)
             finish(q, q_old, v_old, dt, velocity.reshape(R, N, S), acceleration.reshape(R, N, S))
             summary = per_gripper(result.converged, result.iterations, result.ratio, self.n_fingers)
         if midpoint and not end_in_kernel:
@@ -519,9 +519,10 @@ class Simulator:
         return record(StepResult, state=new_state, converged=converged, newton_iterations=iterations, residual=ratio,
                       contact=contact, substeps=np.full(B, 1))
 
-    def _solve_with_contact(self, state, q, step, rods, solver, result):
-        """The predictor–corrector (:func:`~.solvers.corrector.solve_with_contact`, one compiled loop) from Newton's
-        start ``q`` (R, N, S), which receives the solution. With a free body, each solve moves rods and body together
+    def _run_corrector(self, state, q, step, rods, solver, result):
+        """Bundles the holds and the bodies' start for the compiled predictor–corrector
+        (:func:`~.solvers.corrector.solve_with_contact`) and runs it from Newton's start ``q`` (R, N, S), which
+        receives the solution. With a free body, each solve moves rods and body together
         and a new hold keeps its offset in the body's frame; each re-solve starts from the last solution, so Newton
         starts a few penetration depths from the new one (restarting from the predictor would start a hold far from
         a body that the impact has slowed, a jump the 3-D coupled solve did not always survive). Returns the holds
