@@ -173,7 +173,7 @@ class Simulator:
             projection = np.broadcast_to(np.eye(3), (F, 3, 3))
         else:
             projection = np.stack([directions, np.tile([0.0, 0.0, 1.0], (F, 1))], axis=1)
-        self._projection = np.tile(projection, (B, 1, 1))  # rod coordinates from world, (R, D, 3)
+        self._projection = np.ascontiguousarray(np.tile(projection, (B, 1, 1)))  # rod coordinates from world, (R, D, 3)
         obj = scene.grasped_object
         self._has_object = obj is not None
         self._body = None

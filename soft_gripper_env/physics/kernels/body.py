@@ -84,7 +84,7 @@ class BodyState(NamedTuple):
     """Angular velocity [rad/s], (B, 3)."""
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _translational_mass(b, body, orientation_old, mass):
     """Mass plus added mass of body b in the world frame, m·I + R_old·A·R_oldᵀ [kg], into ``mass`` (3, 3)."""
     added = body.added_mass
@@ -97,7 +97,7 @@ def _translational_mass(b, body, orientation_old, mass):
             mass[i, j] = total
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _palm_push(b, body, c, vertical_velocity, orientation, vertical_mass, dt):
     """The palm's push down on body b [N], k·overlap + critical damping 2·√(k·M)·v_z where the body rises above
     the disc (its highest end sphere counts), and the push's derivative by the body's height over the step [N/m].
@@ -136,7 +136,7 @@ def palm_reactions(body, c, c_old, orientation, orientation_old, dt, reaction):
                                     dt)[0]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def body_residual(b, body, c, theta, body_old, orientation, dt, water, residual, matrix):
     """Body b's own residual (6,) (inertia minus external loads) into ``residual``, and the diagonal blocks of its
     Jacobian, translation and rotation, into ``matrix`` (6, 6). ``body`` is :class:`BodyArrays`, ``body_old`` a

@@ -142,7 +142,7 @@ def _hold_in_place(positions, held, hold_at, solve):
                     positions[r, i, d] = hold_at[r, i, d]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shift):
     """After a solve with free bodies: their orientation at the solution, the object as each rod sees it there, and
     its displacement over the step in each rod's coordinates (``shift`` (R, D))."""
@@ -160,7 +160,7 @@ def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shi
                 + projection[r, d, 1] * (c[b, 1] - c_old[b, 1]) + projection[r, d, 2] * (c[b, 2] - c_old[b, 2])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _body_frame_offsets(new_hold, hold_at, holds, motion, n_fingers):
     """The offset of each new hold in its body's frame at the end of the last solve [m], into ``holds.offsets``."""
     projection, orientation, c = holds.projection, motion.orientation, motion.position

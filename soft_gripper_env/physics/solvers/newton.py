@@ -357,7 +357,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, resul
         _finish_gripper(first, n_fingers, False, iterations, gripper_ratio, result)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _place_held_nodes(b, r, q, holds, motion, coupling):
     """Puts rod r's held nodes on the body, x = P·(c + R·r_h), and writes S = P·[I, −[a]×], the motion of each held
     DOF per unit body motion, into ``coupling`` (n, 6) (zero rows elsewhere)."""
@@ -418,7 +418,7 @@ def _rod_residual(r, q, step, rods, terms, solver, free, residual, largest, work
     return own, largest
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _body_residual_in_basis(basis, body_tolerance, own, total, largest):
     """The body's residual ``own`` (6,) in its admissible motions, Bᵀ·own, into ``total``; returns ``largest``
     updated with its scaled entries."""
@@ -452,7 +452,7 @@ def _rods_continue(first, it, max_iterations, result, work):
     return going
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _body_step(b, basis, work):
     """The body's Newton step (6,) into ``work.body_step``, from the reduced system Bᵀ·A·B δ = −Bᵀ·G + Bᵀ·Σ rhs
     (A the body's matrix plus the rods' Schur complements; unused columns of B get the identity)."""
@@ -517,7 +517,7 @@ def _apply_step(b, first, q, free, coupling, work):
             coupling.motion.rotation[b, k] += work.body_step[3 + k]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _back_off(b, first, q, motion, work, fraction):
     """Takes ``fraction`` of the last Newton step back, rods and body (the line search of a free body's solve)."""
     n = work.rod_delta.shape[1]
@@ -530,7 +530,7 @@ def _back_off(b, first, q, motion, work, fraction):
         motion.rotation[b, k] -= fraction * work.body_step[3 + k]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _finish_gripper(first, n_fingers, converged, iterations, ratio, result):
     """Gives every rod of a gripper solved with its body the gripper's outcome."""
     for r in range(first, first + n_fingers):
