@@ -267,7 +267,8 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, resul
     # arrays taken out of their bundles once: a bundle's member read in a loop costs a reference count each time
     active, touching, rod_ratio, factored = work.active, work.touching, work.rod_ratio, work.factored
     converged, iterations_of, ratio = result.converged, result.iterations, result.ratio
-    mass_term = solver.mass_term
+    residual, mass_term, bands, x0 = result.residual, solver.mass_term, work.bands, work.x0
+    scratch = (work.force, work.velocity, work.acceleration)
     n_fingers = solver.n_fingers
     first = b * n_fingers
     coupled = coupling is not None  # every branch on the body tests ``coupling`` itself, so None prunes them
@@ -303,8 +304,11 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, resul
             if coupling is not None:
                 if touching[f]:
                     _place_held_nodes(b, first + f, q, coupling.holds, coupling.motion, work.coupling[f])
-            rod_ratio[f], largest = _rod_residual(first + f, q, step, rods, terms, solver, free, result.residual,
-                                                  largest, work, f)
+            rod_ratio[f], largest = _rod_residual(first + f, q, step, rods, terms, solver, free, residual[first + f],
+                                                  x0[f], largest, bands[f], scratch)
+            if coupling is not None:
+                if touching[f]:
+                    _load_body(residual[first + f], work.coupling[f], work.body_residual)
         if coupling is not None:
             largest = _body_residual_in_basis(coupling.basis[b], solver.body_tolerance, work.body_residual,
                                               work.body_total, largest)
@@ -390,32 +394,39 @@ def _place_held_nodes(b, r, q, holds, motion, coupling):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _rod_residual(r, q, step, rods, terms, solver, free, residual, largest, work, f):
-    """Assembles rod r (finger f of its gripper) and writes its residual (n,) into ``residual[r]``, its Newton matrix
-    into ``work.bands[f]``; a touching rod's reactions load the body (``work.body_residual``). Returns the rod's
-    largest scaled residual and ``largest`` updated with it (NaN is caught: it never compares as small)."""
-    n = residual.shape[1]
-    assemble_rod(r, q, step, rods, terms, True, work.force, work.bands[f], work.velocity, work.acceleration)
-    q_r = q[r].reshape(n)
-    q_pred_r = step.q_pred[r].reshape(n)
-    force_r = work.force.reshape(n)
+def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_side, largest, band, scratch):
+    """Assembles rod r and writes its residual (n,) into ``residual`` and its negation, the Newton step's right-hand
+    side, into ``right_hand_side`` (n,), its Newton matrix into ``band`` (n, kd+1); ``scratch`` holds the work arrays
+    force (N, S), velocity and acceleration (N, D). Returns the rod's largest scaled residual and ``largest``
+    updated with it (NaN is caught: it never compares as small)."""
+    # the caller passes rows and work arrays it took out of their bundles once per solve: this runs once per rod and
+    # Newton iteration, and each bundle member or array view read here would cost an atomic reference count
+    force, velocity, acceleration = scratch
+    assemble_rod(r, q, step, rods, terms, True, force, band, velocity, acceleration)
     own = 0.0
-    mass_term, tolerance_inverse = solver.mass_term, solver.tolerance_inverse
-    right_hand_side = work.x0[f]  # the Newton step's, −r
-    for j in range(n):
-        value = mass_term[j] * (q_r[j] - q_pred_r[j]) - force_r[j]
-        residual[r, j] = value
-        right_hand_side[j] = -value
-        scaled = abs(value) * tolerance_inverse[r, j] if free[r, j] else 0.0
-        if not scaled <= own:
-            own = scaled
-        if not scaled <= largest:
-            largest = scaled
-    if work.touching[f]:
-        for j in range(n):
-            for k in range(6):
-                work.body_residual[k] += work.coupling[f, j, k] * residual[r, j]
+    mass_term, tolerance_inverse, q_pred = solver.mass_term, solver.tolerance_inverse, step.q_pred
+    n_nodes, stride = force.shape
+    for i in range(n_nodes):
+        for k in range(stride):
+            j = i * stride + k
+            value = mass_term[j] * (q[r, i, k] - q_pred[r, i, k]) - force[i, k]
+            residual[j] = value
+            right_hand_side[j] = -value
+            scaled = abs(value) * tolerance_inverse[r, j] if free[r, j] else 0.0
+            if not scaled <= own:
+                own = scaled
+            if not scaled <= largest:
+                largest = scaled
     return own, largest
+
+
+@njit(cache=True, error_model="numpy")
+def _load_body(residual, coupling, body_residual):
+    """Adds a touching rod's reactions, its residual (n,) on held DOFs moved by ``coupling`` (n, 6), to the body's
+    residual (6,)."""
+    for j in range(residual.size):
+        for k in range(6):
+            body_residual[k] += coupling[j, k] * residual[j]
 
 
 @njit(cache=True, error_model="numpy")
@@ -494,23 +505,24 @@ def _apply_step(b, first, q, free, coupling, work):
     body by δ; remembers the rods' steps for the line search."""
     x0, x_coupling, body_step, rod_delta = work.x0, work.x_coupling, work.body_step, work.rod_delta
     active, touching_rods = work.active, work.touching
-    n = x0.shape[1]
+    n_nodes, stride = q.shape[1], q.shape[2]
     for f in range(active.size):
         if not active[f]:
             continue
         r = first + f
-        q_r = q[r].reshape(n)
         touching = touching_rods[f]
-        for j in range(n):
-            delta = 0.0
-            if free[r, j]:
-                delta = x0[f, j]
-                if touching:
-                    for k in range(6):
-                        delta -= x_coupling[f, j, k] * body_step[k]
-            if coupling is not None:  # for the line search, which only a body's solve has
-                rod_delta[f, j] = delta
-            q_r[j] += delta
+        for i in range(n_nodes):  # node by node, not through a flat view (see _rod_residual)
+            for s in range(stride):
+                j = i * stride + s
+                delta = 0.0
+                if free[r, j]:
+                    delta = x0[f, j]
+                    if touching:
+                        for k in range(6):
+                            delta -= x_coupling[f, j, k] * body_step[k]
+                if coupling is not None:  # for the line search, which only a body's solve has
+                    rod_delta[f, j] = delta
+                q[r, i, s] += delta
     if coupling is not None:
         for k in range(3):
             coupling.motion.position[b, k] += work.body_step[k]
