@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .kernels.assembly import RodArrays, StepInputs, assemble
-from .kernels.body import BodyArrays, BodyState, palm_reactions
+from .kernels.body import BodyArrays, BodyMotion, BodyState, palm_reactions
 from .kernels.contact import normal_reactions, object_in_rod_frames
 from .kernels.forces import rod_water_velocity
 from .kernels.rod_3d import rod3d_elastic, rod3d_update_frames
@@ -30,7 +30,6 @@ from .scene.scene import NATURAL_CURVATURE_LIMIT, Scene
 from .solvers.corrector import ContactGeometry, release_held, solve_with_contact
 from .solvers.integrators import INTEGRATORS
 from .solvers.newton import (
-    BodyMotion,
     Holds,
     SolverArrays,
     SolveResult,
@@ -71,6 +70,14 @@ class BodyModel:
         """½·ρ_w·C_n·D·h of a capsule's cylinder, on the velocity normal to its axis [kg/m]; 0 for a sphere."""
         self.isotropic_drag = np.zeros(B)
         """½·ρ_w·C_d·π·r² of the sphere (or a capsule's two end caps together) [kg/m]."""
+        self.displaced_mass = np.zeros(B)
+        """ρ_w·V of the Froude–Krylov force ρ_w·V·a_w [kg], (B,); 0 without it."""
+        self.spin_damping = np.zeros(B)
+        """8π·η·R³ of the creeping-flow torque on the turning body [N·m·s], (B,)."""
+        self.spin_drag = np.zeros(B)
+        """½·ρ_w·6.45·√ν·R⁴ of the boundary layer's torque, ·√|ω|·ω [N·m·s^(3/2)], (B,)."""
+        self.tumble_drag = np.zeros(B)
+        """½·ρ_w·C_n·D·h⁴/32 of a capsule's cylinder turning across its axis, ·|ω⊥|·ω⊥ [N·m·s²]; 0 for a sphere."""
         self.axis = np.tile([0.0, 0.0, 1.0], (B, 1))
         """The capsule's axis in the body frame (B, 3); any unit vector for a sphere."""
         self.segment = (np.zeros((B, 3)), np.zeros((B, 3)))
@@ -101,6 +108,10 @@ class BodyModel:
         self.weight[index] = (m_cylinder + m_caps) * loads.gravity - loads.buoyancy * (cylinder + caps)
         self.normal_drag[index] = loads.normal_drag * 2 * r * length
         self.isotropic_drag[index] = loads.sphere_drag * math.pi * r**2
+        self.displaced_mass[index] = loads.froude_krylov * (cylinder + caps)
+        self.spin_damping[index] = loads.spin_viscous * r**3
+        self.spin_drag[index] = loads.spin_boundary_layer * r**4
+        self.tumble_drag[index] = self.normal_drag[index] * length**3 / 32
         self.axis[index] = axis
         self.segment[0][index] = start - center
         self.segment[1][index] = end - center
@@ -108,7 +119,8 @@ class BodyModel:
     def arrays(self) -> BodyArrays:
         """The bodies' arrays as the compiled kernels take them (views: :meth:`load` updates them)."""
         return BodyArrays(self.mass, self.inertia, self.added_mass, self.weight, self.normal_drag, self.isotropic_drag,
-                          self.axis, self.segment[0], self.segment[1], self.radius, float(self.palm_stiffness),
+                          self.displaced_mass, self.spin_damping, self.spin_drag, self.tumble_drag, self.axis,
+                          self.segment[0], self.segment[1], self.radius, float(self.palm_stiffness),
                           float(self.palm_radius))
 
     def palm_reaction(self, c, c_old, orientation, orientation_old, dt) -> np.ndarray:
@@ -161,12 +173,6 @@ class Simulator:
         self._rods = RodArrays.of(disc)  # 3-D: the frames are the state's, bundled per step (_rod_arrays)
         self._plain_rods, self._plain_terms = plain(self._rods), plain(self._force_terms)
         self._no_acceleration = np.empty((0, 0, 0))
-        moving_water = self._force_terms.drag_normal.size > 0  # only drag feels the current
-        self._currents = CurrentBatch(B) if moving_water else None
-        self._water_cache: tuple[float, tuple[np.ndarray, np.ndarray] | None] = (math.nan, None)
-        if not moving_water:
-            still = np.zeros((B, 3))
-            self._water_cache = (math.inf, (still, rod_water_velocity(disc, still)))  # for all time
         directions = disc.finger_directions
         plane_normals = np.stack([-directions[:, 1], directions[:, 0], np.zeros(F)], axis=1)
         if scene.model == "3d":
@@ -186,6 +192,15 @@ class Simulator:
         else:  # rods on their own or against a fixed object: no body moves, and none is held to
             self._geometry = ContactGeometry(np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), directions,
                                              plane_normals, np.empty((0, 6, 6)))
+        # the current moves what feels it: the rods' drag, and a free body's drag and the water's inertia on it
+        body_loads = None if self._body is None else self._body.loads
+        moving_water = self._force_terms.drag_normal.size > 0 or (body_loads is not None and (
+            body_loads.sphere_drag > 0 or body_loads.froude_krylov > 0 or body_loads.sphere_added_mass > 0))
+        self._currents = CurrentBatch(B) if moving_water else None
+        self._water_cache: tuple[float, tuple[np.ndarray, np.ndarray] | None] = (math.nan, None)
+        if not moving_water:
+            still = np.zeros((B, 3))
+            self._water_cache = (math.inf, (still, rod_water_velocity(disc, still)))  # for all time
         self._plain_geometry = plain(self._geometry)  # the same arrays: _load and the kernels write into them
         for index, each in enumerate(self.scenes):
             if each is not scene and _structure(each) != self._structure:
@@ -539,8 +554,11 @@ class Simulator:
                                                                 state.body_orientation,
                                                                 state.body_angular_velocity)))
             body = self._body.plain_arrays
+            water_acceleration = np.zeros((self.batch_size, 3)) if self._currents is None else \
+                self._currents.mean_acceleration(state.time, dt)
             motion = BodyMotion(old.position + dt * old.velocity, dt * old.angular_velocity,
-                                np.empty((self.batch_size, 3, 3)), old, self._water(state.time)[0])  # the predictor
+                                np.empty((self.batch_size, 3, 3)), old, self._water(state.time)[0],
+                                water_acceleration)  # the predictor
             free_body = (body, plain(motion))
             holds = Holds(held, state.hold_offset.reshape(R, N, 3).copy(), self._projection)
         solve_with_contact(q, tuple(step), rods, self._plain_terms, solver, tuple(holds), hold_at,

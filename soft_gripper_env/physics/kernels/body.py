@@ -27,7 +27,10 @@ orientation is left out of the Newton matrix). External loads come from the scen
 :class:`~..scene.forces.BodyLoads`: gravity, buoyancy, and with Morison drag quadratic drag on the velocity relative
 to the current: ½·ρ_w·C_d·π·r²·|w|·w for a sphere (C_d = 0.47, Re ≈ 10³–10⁵) or a capsule's two end caps, plus
 ½·ρ_w·C_n·D·h·|w_n|·w_n across a capsule's cylinder; with added mass, C_a = 0.5 of a sphere's volume, and
-C_a·ρ_w·π·r²·h across a capsule's cylinder. The water's torque on a turning body is neglected.
+C_a·ρ_w·π·r²·h across a capsule's cylinder, on the body's acceleration relative to an accelerating current, and the
+Froude–Krylov force ρ_w·V·a_w of that current's pressure gradient. A turning body feels the creeping-flow torque
+8π·η·R³·ω plus a laminar boundary layer's, and a capsule's cylinder turning across its axis the strip-theory drag
+of its cross-section.
 
 These are the body's kernels; Newton's method on rods and body together is :func:`~..solvers.newton.newton`.
 """
@@ -57,6 +60,14 @@ class BodyArrays(NamedTuple):
     """½·ρ_w·C_n·D·h of a capsule's cylinder, on the velocity normal to its axis [kg/m], (B,); 0 for a sphere."""
     isotropic_drag: np.ndarray
     """½·ρ_w·C_d·π·r² of the sphere (or a capsule's two end caps together) [kg/m], (B,)."""
+    displaced_mass: np.ndarray
+    """ρ_w·V of the Froude–Krylov force ρ_w·V·a_w [kg], (B,)."""
+    spin_damping: np.ndarray
+    """8π·η·R³: the creeping-flow torque on the turning body is −this·ω [N·m·s], (B,)."""
+    spin_drag: np.ndarray
+    """The boundary layer's torque is −this·√|ω|·ω [N·m·s^(3/2)], (B,)."""
+    tumble_drag: np.ndarray
+    """A capsule's cylinder turning across its axis feels −this·|ω⊥|·ω⊥ [N·m·s²], (B,); 0 for a sphere."""
     axis: np.ndarray
     """The capsule's axis in the body frame, (B, 3); any unit vector for a sphere."""
     segment_start: np.ndarray
@@ -82,6 +93,23 @@ class BodyState(NamedTuple):
     """Orientation, body to world, (B, 3, 3)."""
     angular_velocity: np.ndarray
     """Angular velocity [rad/s], (B, 3)."""
+
+
+class BodyMotion(NamedTuple):
+    """The free bodies' unknowns over a step, what they start from, and the water around them."""
+
+    position: np.ndarray
+    """The centre c at the end of the step [m], (B, 3): Newton's start on entry, the solution on return."""
+    rotation: np.ndarray
+    """The rotation θ over the step [rad], R = exp([θ]×)·R_old, (B, 3): start and solution, as ``position``."""
+    orientation: np.ndarray
+    """R at the solution, (B, 3, 3), written by the solve."""
+    old: BodyState
+    """The bodies at the start of the step."""
+    water: np.ndarray
+    """The current at each body [m/s], (B, 3)."""
+    water_acceleration: np.ndarray
+    """The current's mean acceleration over the step at each body [m/s²], (B, 3)."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -137,11 +165,12 @@ def palm_reactions(body, c, c_old, orientation, orientation_old, dt, reaction):
 
 
 @njit(cache=True, error_model="numpy")
-def body_residual(b, body, c, theta, body_old, orientation, dt, water, residual, matrix):
+def body_residual(b, body, motion, orientation, dt, residual, matrix):
     """Body b's own residual (6,) (inertia minus external loads) into ``residual``, and the diagonal blocks of its
-    Jacobian, translation and rotation, into ``matrix`` (6, 6). ``body`` is :class:`BodyArrays`, ``body_old`` a
-    :class:`BodyState`; ``orientation`` (3, 3) is the end-of-step R; ``water`` (B, 3) the current at each body [m/s]."""
-    c_old, u_old, orientation_old, w_old = body_old
+    Jacobian, translation and rotation, into ``matrix`` (6, 6). ``body`` is :class:`BodyArrays`, ``motion``
+    :class:`BodyMotion` (at Newton's current iterate); ``orientation`` (3, 3) is the end-of-step R."""
+    c, theta, water = motion.position, motion.rotation, motion.water
+    c_old, u_old, orientation_old, w_old = motion.old
     inertia, weight, normal_drag, isotropic_drag, axis_body = body.inertia, body.weight, body.normal_drag, \
         body.isotropic_drag, body.axis
     mass = np.empty((3, 3))
@@ -177,6 +206,12 @@ def body_residual(b, body, c, theta, body_old, orientation, dt, water, residual,
     push, stiffness = _palm_push(b, body, c, u[2], orientation, mass[2, 2], dt)
     force[2] -= push
     matrix[2, 2] += stiffness
+    # the water's inertia in an accelerating current: the Froude–Krylov force ρ_w·V·a_w and the added mass's share of
+    # the relative acceleration, A·a_w (A·u̇ is in ``mass``)
+    for i in range(3):
+        force[i] += body.displaced_mass[b] * motion.water_acceleration[b, i]
+        for j in range(3):
+            force[i] += (mass[i, j] - (body.mass[b] if i == j else 0.0)) * motion.water_acceleration[b, j]
     for i in range(3):
         total = -force[i]
         for j in range(3):
@@ -195,6 +230,37 @@ def body_residual(b, body, c, theta, body_old, orientation, dt, water, residual,
             momentum += new * theta[b, j] / dt - old * w_old[b, j]
             matrix[3 + i, 3 + j] = new / (dt * dt)
         residual[3 + i] = momentum / dt
+    _water_torque(b, body, theta[b], axis, dt, residual, matrix)
+
+
+@njit(cache=True, error_model="numpy")
+def _water_torque(b, body, theta, axis, dt, residual, matrix):
+    """Adds the water's resistance to the body turning at ω = θ/Δt to its rotational residual (the torque's negation)
+    and Jacobian by θ: −(8π·η·R³ + s·√|ω|)·ω on the sphere (or end caps), and −t·|ω⊥|·ω⊥ on a capsule's cylinder
+    turning across its axis (``axis`` (3,), world frame)."""
+    damping, spin, tumble = body.spin_damping[b], body.spin_drag[b], body.tumble_drag[b]
+    omega = np.empty(3)
+    across = np.empty(3)
+    for i in range(3):
+        omega[i] = theta[i] / dt
+    along = omega[0] * axis[0] + omega[1] * axis[1] + omega[2] * axis[2]
+    for i in range(3):
+        across[i] = omega[i] - along * axis[i]
+    rate = math.sqrt(omega[0] ** 2 + omega[1] ** 2 + omega[2] ** 2)
+    tumbling = math.sqrt(across[0] ** 2 + across[1] ** 2 + across[2] ** 2)
+    root = math.sqrt(rate)
+    for i in range(3):
+        residual[3 + i] += (damping + spin * root) * omega[i] + tumble * tumbling * across[i]
+        for j in range(3):
+            identity = 1.0 if i == j else 0.0
+            projector = identity - axis[i] * axis[j]
+            d_torque = (damping + spin * root) * identity  # ∂(−torque)/∂ω
+            if rate > 0.0:
+                d_torque += spin * omega[i] * omega[j] / (2.0 * root * rate)
+            d_torque += tumble * tumbling * projector
+            if tumbling > 0.0:
+                d_torque += tumble * across[i] * across[j] / tumbling
+            matrix[3 + i, 3 + j] += d_torque / dt
 
 
 @njit(cache=True, error_model="numpy")
@@ -308,5 +374,5 @@ def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finge
                 radii[r] = math.sqrt(max(radius[b] ** 2 - across**2, 0.0))
 
 
-__all__ = ["BodyArrays", "BodyState", "palm_reactions", "body_residual", "turned", "admissible_rotation",
+__all__ = ["BodyArrays", "BodyState", "BodyMotion", "palm_reactions", "body_residual", "turned", "admissible_rotation",
            "planar_body_basis", "body_in_rod_frames"]

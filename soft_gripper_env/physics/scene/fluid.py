@@ -79,6 +79,11 @@ class CurrentBatch:
         angle = 2 * math.pi * (time - self.start_time) / self.period + self.phase
         return self.velocity + self.oscillation * np.sin(angle)[:, None]
 
+    def mean_acceleration(self, time: float, dt: float) -> np.ndarray:
+        """The water's mean acceleration over [time, time + dt] at every gripper, (u(t + Δt) − u(t))/Δt [m/s²],
+        (B, 3): a force proportional to it gives exactly the impulse of the current's change over the step."""
+        return (self.at(time + dt) - self.at(time)) / dt
+
 
 @dataclass(frozen=True)
 class Fluid:

@@ -80,6 +80,14 @@ class BodyLoads:
     """½·ρ_w·C_n across a capsule's cylinder [kg/m³]."""
     sphere_drag: float = 0.0
     """½·ρ_w·C_d of a sphere (and a capsule's end caps) [kg/m³]."""
+    froude_krylov: float = 0.0
+    """ρ_w of the undisturbed flow whose pressure gradient pushes the body with ρ_w·V·a_w in an accelerating current
+    (the Froude–Krylov force) [kg/m³]."""
+    spin_viscous: float = 0.0
+    """8π·η: the creeping-flow torque on a sphere turning at ω is 8π·η·R³·ω [Pa·s]."""
+    spin_boundary_layer: float = 0.0
+    """½·ρ_w·6.45·√ν: the laminar boundary layer's torque on a sphere turning at ω is this ·R⁴·√|ω|·ω
+    [kg/(m²·s^½)]."""
 
     @classmethod
     def total(cls, models, fluid: Fluid) -> BodyLoads:
@@ -236,13 +244,21 @@ class MorisonDrag(ForceModel):
                 "drag_tangential": half_density_area * (math.pi * self.tangential_coefficient)}
 
     def body_loads(self, fluid):
+        """Drag on the body's velocity relative to the water, and the water's torque on a turning body: the
+        creeping-flow torque 8π·η·R³·ω plus the laminar boundary layer's, ½·ρ_w·ω²·R⁵·C_M with
+        C_M = 6.45/√Re_ω, Re_ω = ω·R²/ν (``docs/water.md``)."""
+        kinematic_viscosity = fluid.viscosity / fluid.density if fluid.density > 0.0 else 0.0
         return BodyLoads(normal_drag=0.5 * fluid.density * self.normal_coefficient,
-                         sphere_drag=0.5 * fluid.density * self.sphere_drag_coefficient)
+                         sphere_drag=0.5 * fluid.density * self.sphere_drag_coefficient,
+                         spin_viscous=8.0 * math.pi * fluid.viscosity,
+                         spin_boundary_layer=0.5 * fluid.density * SPIN_BOUNDARY_LAYER_COEFFICIENT
+                         * math.sqrt(kinematic_viscosity))
 
 
 @dataclass(frozen=True)
 class AddedMass(ForceModel):
-    """The inertia of the water a finger carries along: C_a·ρ_w·(π·D²/4) per unit length on normal accelerations."""
+    """The inertia of the water a finger carries along: C_a·ρ_w·(π·D²/4) per unit length on normal accelerations;
+    on a free body, added mass on its acceleration relative to the water and the Froude–Krylov force."""
 
     coefficient: float = 1.0
     """C_a, dimensionless; 1 for a circular cylinder."""
@@ -259,8 +275,16 @@ class AddedMass(ForceModel):
                 * disc.rest_edge_length}
 
     def body_loads(self, fluid):
+        """The water's inertia on a free body: added mass on its acceleration relative to the water, and the
+        Froude–Krylov force ρ_w·V·a_w of an accelerating current (together Morison's inertia term
+        (1 + C_a)·ρ_w·V·a_w on a body at rest)."""
         return BodyLoads(cylinder_added_mass=self.coefficient * fluid.density,
-                         sphere_added_mass=self.sphere_coefficient * fluid.density)
+                         sphere_added_mass=self.sphere_coefficient * fluid.density, froude_krylov=fluid.density)
+
+
+SPIN_BOUNDARY_LAYER_COEFFICIENT = 6.45
+"""C_M·√Re_ω of a sphere turning in still fluid with a laminar boundary layer (Re_ω = ω·R²/ν ≈ 10²–10⁵), from
+Sawatzki's measurements (1970) as quoted in the literature on rotating spheres; dimensionless."""
 
 
 def _vertical(disc: Discretization, value: np.ndarray) -> np.ndarray:

@@ -26,11 +26,11 @@ import numpy as np
 from numba import njit
 
 from ..kernels.assembly import RodArrays, StepInputs
-from ..kernels.body import BodyArrays, BodyState, body_in_rod_frames, planar_body_basis, turned
+from ..kernels.body import BodyArrays, BodyMotion, BodyState, body_in_rod_frames, planar_body_basis, turned
 from ..kernels.contact import ObjectView, find_penetrations, normal_reactions, within_reach
 from ..scene.forces import ForceTerms
 from ..scene.objects import PENETRATION_TOLERANCE
-from .newton import BodyCoupling, BodyMotion, Holds, SolverArrays, SolveResult, newton
+from .newton import BodyCoupling, Holds, SolverArrays, SolveResult, newton
 
 
 class ContactGeometry(NamedTuple):
@@ -73,7 +73,7 @@ def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, f
     the start of the step (``held`` (R, N), and for a free body their ``offsets``), updated in place; ``hold_at``
     (R, N, D) where each held node is held in its rod's coordinates, the start of the step's positions on entry.
     ``geometry`` is :class:`ContactGeometry`; ``free_body`` None for a fixed object, else the bodies' arrays
-    (:class:`~..kernels.body.BodyArrays`) and their unknowns (:class:`~.newton.BodyMotion`, start and solution).
+    (:class:`~..kernels.body.BodyArrays`) and their unknowns (:class:`~..kernels.body.BodyMotion`, start and solution).
     Writes per rod the Newton results, the corrector's solves and whether the last test still changed the rod's
     contacts into ``result`` (:class:`~.newton.SolveResult`). Every bundle arrives as its fields in plain tuples
     (:func:`~.newton.plain`) and is named again here; the loop is compiled apart for fixed and free objects.
@@ -84,7 +84,8 @@ def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, f
         _correct(q, step, rods, terms, solver, holds, hold_at, geometry, None, result)
     else:
         body, motion = free_body
-        moving = (BodyArrays(*body), BodyMotion(motion[0], motion[1], motion[2], BodyState(*motion[3]), motion[4]))
+        moving = (BodyArrays(*body), BodyMotion(motion[0], motion[1], motion[2], BodyState(*motion[3]), motion[4],
+                                                    motion[5]))
         _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 from ..kernels.assembly import RodArrays, StepInputs, assemble_rod
-from ..kernels.body import BodyArrays, BodyState, admissible_rotation, body_residual, turned
+from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
 from ..kernels.linalg import factor_banded_symmetric, solve_factored
 from ..scene.forces import ForceTerms
 
@@ -93,21 +93,6 @@ def plain(bundle: tuple) -> tuple:
     again (:func:`advance_rods`, :func:`~.corrector.solve_with_contact`). Numba types a plain tuple at every call
     several times faster than a named one, whose field names it reads each time."""
     return tuple(plain(value) if isinstance(value, tuple) else value for value in bundle)
-
-
-class BodyMotion(NamedTuple):
-    """The free bodies' unknowns over a step and what they start from."""
-
-    position: np.ndarray
-    """The centre c at the end of the step [m], (B, 3): Newton's start on entry, the solution on return."""
-    rotation: np.ndarray
-    """The rotation θ over the step [rad], R = exp([θ]×)·R_old, (B, 3): start and solution, as ``position``."""
-    orientation: np.ndarray
-    """R at the solution, (B, 3, 3), written by the solve."""
-    old: BodyState
-    """The bodies at the start of the step (:class:`~..kernels.body.BodyState`)."""
-    water: np.ndarray
-    """The current at each body [m/s], (B, 3)."""
 
 
 class BodyCoupling(NamedTuple):
@@ -296,8 +281,8 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, resul
         if coupling is not None:
             motion = coupling.motion
             turned(motion.rotation[b], motion.old.orientation[b], work.rotation, motion.orientation[b])
-            body_residual(b, coupling.body, motion.position, motion.rotation, motion.old, motion.orientation[b],
-                          step.dt, motion.water, work.body_residual, work.body_matrix)
+            body_residual(b, coupling.body, motion, motion.orientation[b], step.dt, work.body_residual,
+                          work.body_matrix)
         for f in range(n_fingers):
             if not active[f]:
                 continue
@@ -646,5 +631,5 @@ def per_gripper(converged, iterations, ratio, n_fingers):
     return all_converged, most, largest
 
 
-__all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "BodyMotion", "BodyCoupling", "MAX_STEP_HALVINGS",
+__all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "BodyCoupling", "MAX_STEP_HALVINGS",
            "eliminate_rods", "newton", "advance_rods", "predict", "finish", "midpoint_end", "per_gripper"]
