@@ -29,7 +29,7 @@ from .scene.forces import (
     StokesDrag,
     fluid_forces,
 )
-from .scene.objects import PAPER_BALL, PENETRATION_TOLERANCE, Capsule, ContactSettings, Sphere
+from .scene.objects import DEFAULT_FRICTION, PAPER_BALL, PENETRATION_TOLERANCE, Capsule, ContactSettings, Sphere
 from .scene.scene import (
     INTEGRATOR_NAMES,
     NATURAL_CURVATURE_LIMIT,
@@ -46,7 +46,8 @@ __all__ = [
     "ELASTOSIL_MA_4601", "SOFT_TRANSLUCENT_SILICONE", "FingerDesign", "GripperDesign", "Material", "linear_taper",
     "paper_finger", "Discretization", "WATER", "WATER_DENSITY", "WATER_VISCOSITY", "Current", "Fluid",
     "PAPER_DEFECTIVE_DRAG", "AddedMass", "BodyLoads", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping",
-    "MorisonDrag", "StokesDrag", "fluid_forces", "PAPER_BALL", "PENETRATION_TOLERANCE", "Capsule", "ContactSettings",
+    "MorisonDrag", "StokesDrag", "fluid_forces", "PAPER_BALL", "PENETRATION_TOLERANCE", "DEFAULT_FRICTION", "Capsule",
+    "ContactSettings",
     "Sphere", "INTEGRATOR_NAMES", "NATURAL_CURVATURE_LIMIT", "NewtonSettings", "Scene", "cantilever_scene",
     "paper_scene", "check_range", "Simulator", "Trajectory", "run_ramp", "ContactReport", "RodState", "StepResult",
     "put_grippers", "take_grippers", "StepContext", "evaluate_force",

@@ -26,6 +26,7 @@ from .kernels.rod_3d import rod3d_elastic, rod3d_update_frames
 from .kernels.rod_planar import planar_elastic
 from .scene.fluid import Current, CurrentBatch
 from .scene.forces import BodyLoads, ForceTerms
+from .scene.objects import ContactSettings
 from .scene.scene import NATURAL_CURVATURE_LIMIT, Scene
 from .solvers.corrector import ContactGeometry, release_held, solve_with_contact
 from .solvers.integrators import INTEGRATORS
@@ -47,12 +48,9 @@ class BodyModel:
     """Mass properties and external loads of the free spheres or capsules of a batch of B grippers, one each, as
     arrays with a leading batch axis (body frame = world at t = 0). :meth:`load` sets one gripper's body."""
 
-    def __init__(self, loads: BodyLoads, batch_size: int, palm_stiffness: float = 0.0,
-                 palm_radius: float = 0.0) -> None:
-        self.palm_stiffness = palm_stiffness
-        """k of the palm disc in the plane z = 0 [N/m] (:class:`~.scene.objects.ContactSettings`)."""
-        self.palm_radius = palm_radius
-        """Its radius [m]."""
+    def __init__(self, loads: BodyLoads, batch_size: int, contact: ContactSettings) -> None:
+        self.contact = contact
+        """The palm's settings (:class:`~.scene.objects.ContactSettings`)."""
         self.loads = loads
         """The scene's force models' constants for the body (:class:`~.scene.forces.BodyLoads`)."""
         B = batch_size
@@ -120,13 +118,15 @@ class BodyModel:
         """The bodies' arrays as the compiled kernels take them (views: :meth:`load` updates them)."""
         return BodyArrays(self.mass, self.inertia, self.added_mass, self.weight, self.normal_drag, self.isotropic_drag,
                           self.displaced_mass, self.spin_damping, self.spin_drag, self.tumble_drag, self.axis,
-                          self.segment[0], self.segment[1], self.radius, float(self.palm_stiffness),
-                          float(self.palm_radius))
+                          self.segment[0], self.segment[1], self.radius, float(self.contact.palm_stiffness),
+                          float(self.contact.palm_radius), float(self.contact.palm_damping_depth),
+                          float(self.contact.palm_friction))
 
-    def palm_reaction(self, c, c_old, orientation, orientation_old, dt) -> np.ndarray:
-        """The force of each body on the palm [N], (B, 3), over a step from ``c_old`` to ``c`` of ``dt`` [s]."""
+    def palm_reaction(self, c, c_old, theta, orientation, orientation_old, dt) -> np.ndarray:
+        """The force of each body on the palm [N], (B, 3), over a step of ``dt`` [s] from ``c_old`` to ``c`` and
+        turning by ``theta`` [rad] (B, 3)."""
         reaction = np.zeros_like(c)
-        palm_reactions(self.plain_arrays, c, c_old, orientation, orientation_old, dt, reaction)
+        palm_reactions(self.plain_arrays, c, c_old, theta, orientation, orientation_old, dt, reaction)
         return reaction
 
 
@@ -184,8 +184,7 @@ class Simulator:
         self._has_object = obj is not None
         self._body = None
         if obj is not None and obj.free:
-            self._body = BodyModel(BodyLoads.total(scene.forces, scene.fluid), B, scene.contact.palm_stiffness,
-                                   scene.contact.palm_radius)
+            self._body = BodyModel(BodyLoads.total(scene.forces, scene.fluid), B, scene.contact)
             any_motion = np.tile(np.eye(6), (B, 1, 1)) if scene.model == "3d" else np.empty((0, 6, 6))
             self._geometry = ContactGeometry(np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), directions,
                                              plane_normals, any_motion)
@@ -529,7 +528,7 @@ class Simulator:
                 corrector_iterations=result.corrector.reshape(B, F).max(axis=1),
                 resolved=~result.changed.reshape(B, F).any(axis=1),
                 palm_reaction=None if body is None else self._body.palm_reaction(
-                    body[1], state.body_position, body[3], state.body_orientation, dt))
+                    body[1], state.body_position, body[4] * dt, body[3], state.body_orientation, dt))
         converged, iterations, ratio = summary
         return record(StepResult, state=new_state, converged=converged, newton_iterations=iterations, residual=ratio,
                       contact=contact, substeps=np.full(B, 1))

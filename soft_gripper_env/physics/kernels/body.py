@@ -80,6 +80,10 @@ class BodyArrays(NamedTuple):
     """k of the palm disc in the plane z = 0 [N/m]."""
     palm_radius: float
     """Its radius [m]."""
+    palm_damping_depth: float
+    """The overlap over which the palm's damping grows to critical [m]."""
+    palm_friction: float
+    """μ between the palm and the body (dimensionless)."""
 
 
 class BodyState(NamedTuple):
@@ -125,14 +129,28 @@ def _translational_mass(b, body, orientation_old, mass):
             mass[i, j] = total
 
 
+PALM_STICK_SPEED = 1e-3
+"""The slip speed [m/s] below which the palm's friction grows in proportion to the slip instead of at the full
+μ·N: a regularised stick, so that the friction has a derivative for Newton's method. A body held against the palm
+creeps at most this fast under a tangential load below μ·N."""
+
+
 @njit(cache=True, error_model="numpy")
-def _palm_push(b, body, c, vertical_velocity, orientation, vertical_mass, dt):
-    """The palm's push down on body b [N], k·overlap + critical damping 2·√(k·M)·v_z where the body rises above
-    the disc (its highest end sphere counts), and the push's derivative by the body's height over the step [N/m].
-    ``orientation`` (3, 3)."""
+def _palm_contact(b, body, c, velocity, omega, orientation, vertical_mass, dt, load, matrix):
+    """Adds the palm's force and torque on body b (6,) [N, N·m] to ``load``, and their negated derivatives by the
+    body's unknowns over the step (centre and rotation, (6, 6)) to ``matrix``.
+
+    The palm is the disc of radius ``palm_radius`` in the plane z = 0; the body's highest end sphere counts. With
+    the overlap δ > 0 above the plane, it pushes down with N = max(0, k·δ + d(δ)·u_z), where the damping
+    d(δ) = 2·√(k·M)·min(δ/δ_d, 1) (critical for the body's vertical mass M once δ ≥ δ_d, ``palm_damping_depth``)
+    grows from zero with the overlap: the force is continuous at first touch and never pulls. Coulomb friction
+    −μ·N·s/√(|s|² + v_s²) opposes the slip s, the horizontal velocity of the body's point on the palm
+    (v_s = :data:`PALM_STICK_SPEED`). The overlap's dependence on the horizontal position and the orientation is
+    left out of the derivatives. ``velocity`` and ``omega`` (3,) are the body's over the step, ``orientation``
+    (3, 3) its R."""
     stiffness, palm_radius = body.palm_stiffness, body.palm_radius
     if stiffness == 0.0:
-        return 0.0, 0.0
+        return
     radius = body.radius[b]
     top_end = np.empty(3)
     highest = -np.inf
@@ -145,23 +163,76 @@ def _palm_push(b, body, c, vertical_velocity, orientation, vertical_mass, dt):
             highest = end[2]
             top_end[:] = end
     outside = max(math.hypot(top_end[0], top_end[1]) - palm_radius, 0.0)  # past the disc's rim
-    top = top_end[2] + math.sqrt(max(radius * radius - outside * outside, 0.0))
-    if not (top > 0.0 and outside < radius):
-        return 0.0, 0.0
-    damping = 2.0 * math.sqrt(stiffness * vertical_mass)
-    return stiffness * top + damping * vertical_velocity, stiffness + damping / dt
+    cap = math.sqrt(max(radius * radius - outside * outside, 0.0))
+    overlap = top_end[2] + cap
+    if not (overlap > 0.0 and outside < radius):
+        return
+    critical = 2.0 * math.sqrt(stiffness * vertical_mass)
+    depth = body.palm_damping_depth
+    ramp = min(overlap / depth, 1.0) if depth > 0.0 else 1.0
+    push = stiffness * overlap + critical * ramp * velocity[2]
+    if push <= 0.0:  # separating faster than the overlap pushes: no pull
+        return
+    d_push = stiffness + critical * ramp / dt + (critical * velocity[2] / depth if 0.0 < overlap < depth else 0.0)
+    arm = np.empty(3)  # from the centre to the body's point on the palm
+    for i in range(3):
+        arm[i] = top_end[i] - c[b, i]
+    arm[2] += cap
+    d_force = np.zeros((3, 6))  # ∂(force on the body)/∂(c, θ)
+    d_force[2, 2] = -d_push
+    mu = body.palm_friction
+    force = np.zeros(3)
+    force[2] = -push
+    if mu > 0.0:
+        slip = np.empty(2)  # u + ω × a, horizontal
+        slip[0] = velocity[0] + omega[1] * arm[2] - omega[2] * arm[1]
+        slip[1] = velocity[1] + omega[2] * arm[0] - omega[0] * arm[2]
+        norm = math.sqrt(slip[0] ** 2 + slip[1] ** 2 + PALM_STICK_SPEED**2)
+        d_slip = np.zeros((2, 6))  # ∂slip/∂(c, θ): u = (c − c_old)/Δt, ω = θ/Δt
+        d_slip[0, 0] = d_slip[1, 1] = 1.0 / dt
+        d_slip[0, 4], d_slip[0, 5] = arm[2] / dt, -arm[1] / dt
+        d_slip[1, 5], d_slip[1, 3] = arm[0] / dt, -arm[2] / dt
+        for i in range(2):
+            force[i] = -mu * push * slip[i] / norm
+            for m in range(6):
+                total = 0.0
+                for j in range(2):
+                    total += ((1.0 if i == j else 0.0) / norm - slip[i] * slip[j] / norm**3) * d_slip[j, m]
+                d_force[i, m] = -mu * push * total
+            d_force[i, 2] -= mu * d_push * slip[i] / norm
+    for i in range(3):
+        load[i] += force[i]
+    load[3] += arm[1] * force[2] - arm[2] * force[1]
+    load[4] += arm[2] * force[0] - arm[0] * force[2]
+    load[5] += arm[0] * force[1] - arm[1] * force[0]
+    for m in range(6):
+        for i in range(3):
+            matrix[i, m] -= d_force[i, m]
+        matrix[3, m] -= arm[1] * d_force[2, m] - arm[2] * d_force[1, m]
+        matrix[4, m] -= arm[2] * d_force[0, m] - arm[0] * d_force[2, m]
+        matrix[5, m] -= arm[0] * d_force[1, m] - arm[1] * d_force[0, m]
 
 
 @njit(cache=True, error_model="numpy")
-def palm_reactions(body, c, c_old, orientation, orientation_old, dt, reaction):
-    """Writes the force of every body on the palm (B, 3) [N] into ``reaction``; ``body`` holds the fields of
-    :class:`BodyArrays` as a plain tuple (an entry point: numba types plain tuples faster)."""
+def palm_reactions(body, c, c_old, theta, orientation, orientation_old, dt, reaction):
+    """Writes the force of every body on the palm (B, 3) [N] into ``reaction``, for bodies moved from ``c_old`` to
+    ``c`` and turned by ``theta`` (B, 3) over the step; ``body`` holds the fields of :class:`BodyArrays` as a plain
+    tuple (an entry point: numba types plain tuples faster)."""
     body = BodyArrays(*body)
     mass = np.empty((3, 3))
+    load = np.empty(6)
+    scratch = np.zeros((6, 6))
+    velocity = np.empty(3)
+    omega = np.empty(3)
     for b in range(c.shape[0]):
         _translational_mass(b, body, orientation_old, mass)
-        reaction[b, 2] = _palm_push(b, body, c, (c[b, 2] - c_old[b, 2]) / dt, orientation[b], mass[2, 2],
-                                    dt)[0]
+        for i in range(3):
+            velocity[i] = (c[b, i] - c_old[b, i]) / dt
+            omega[i] = theta[b, i] / dt
+        load[:] = 0.0
+        _palm_contact(b, body, c, velocity, omega, orientation[b], mass[2, 2], dt, load, scratch)
+        for i in range(3):
+            reaction[b, i] = -load[i]
 
 
 @njit(cache=True, error_model="numpy")
@@ -203,9 +274,13 @@ def body_residual(b, body, motion, orientation, dt, residual, matrix):
             for j in range(3):
                 projector = (1.0 if i == j else 0.0) - (axis[i] * axis[j] if normal_only else 0.0)
                 matrix[i, j] += coefficient / dt * (speed * projector + part[i] * part[j] / safe)
-    push, stiffness = _palm_push(b, body, c, u[2], orientation, mass[2, 2], dt)
-    force[2] -= push
-    matrix[2, 2] += stiffness
+    palm = np.zeros(6)
+    omega = np.empty(3)
+    for i in range(3):
+        omega[i] = theta[b, i] / dt
+    _palm_contact(b, body, c, u, omega, orientation, mass[2, 2], dt, palm, matrix)
+    for i in range(3):
+        force[i] += palm[i]
     # the water's inertia in an accelerating current: the Froude–Krylov force ρ_w·V·a_w and the added mass's share of
     # the relative acceleration, A·a_w (A·u̇ is in ``mass``)
     for i in range(3):
@@ -228,8 +303,8 @@ def body_residual(b, body, motion, orientation, dt, residual, matrix):
                     new += orientation[i, k] * inertia[b, k, m] * orientation[j, m]
                     old += orientation_old[b, i, k] * inertia[b, k, m] * orientation_old[b, j, m]
             momentum += new * theta[b, j] / dt - old * w_old[b, j]
-            matrix[3 + i, 3 + j] = new / (dt * dt)
-        residual[3 + i] = momentum / dt
+            matrix[3 + i, 3 + j] += new / (dt * dt)
+        residual[3 + i] = momentum / dt - palm[3 + i]
     _water_torque(b, body, theta[b], axis, dt, residual, matrix)
 
 

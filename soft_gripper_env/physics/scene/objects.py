@@ -17,6 +17,10 @@ from .validation import check_range
 PENETRATION_TOLERANCE = 1e-6
 """No free node ends a step deeper inside the object than this [m]."""
 
+DEFAULT_FRICTION = 0.3
+"""The default Coulomb friction coefficient μ of silicone on a wet object (dimensionless); the sources and the
+range it is drawn from are in ``docs/contact.md``."""
+
 
 @dataclass(frozen=True)
 class _Body:
@@ -115,12 +119,16 @@ class ContactSettings:
     """Re-solves of one step allowed for new contacts and releases."""
     palm_stiffness: float = 1000.0
     """The palm, a disc of radius ``palm_radius`` about the z axis in the plane z = 0 of the finger bases, pushes
-    a free object that overlaps it back down with this stiffness [N/m] (1 mm of overlap per newton), critically
-    damped for the object's mass; 0 turns it off. Contact is node-based, so the palm, like the fingers, is its
-    centre plane. Without it an object pushed up by the fingers would pass the clamped nodes and be crushed
-    against the finger roots."""
+    a free object that overlaps it back down with this stiffness [N/m] (1 mm of overlap per newton); 0 turns it
+    off. Without it an object pushed up by the fingers would pass the clamped nodes and be crushed against the
+    finger roots. It only pushes, and its force is continuous at first touch (``docs/contact.md``)."""
     palm_radius: float = 0.03
     """Radius of the palm disc [m]: the finger roots (the two clamped nodes reach 0.021 m) and a little more."""
+    palm_damping_depth: float = 1e-3
+    """The overlap [m] over which the palm's damping grows from zero to critical for the object's mass: a damping
+    switched on at first touch would be a jump in force."""
+    palm_friction: float = DEFAULT_FRICTION
+    """Coulomb friction coefficient μ between the palm and the object (dimensionless); 0 is frictionless."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_corrector_iterations, (int, np.integer)) or \
@@ -129,6 +137,11 @@ class ContactSettings:
                              f"outside the allowed range [0, 100] (integer count)")
         check_range("ContactSettings", "palm_stiffness", self.palm_stiffness, "N/m", 0.0, 1e9, low_inclusive=True)
         check_range("ContactSettings", "palm_radius", self.palm_radius, "m", 0.0, 10.0, low_inclusive=True)
+        check_range("ContactSettings", "palm_damping_depth", self.palm_damping_depth, "m", 0.0, 1.0,
+                    low_inclusive=True)
+        check_range("ContactSettings", "palm_friction", self.palm_friction, "(dimensionless)", 0.0, 1e6,
+                    low_inclusive=True)
 
 
-__all__ = ["PENETRATION_TOLERANCE", "Sphere", "Capsule", "GraspedObject", "PAPER_BALL", "ContactSettings"]
+__all__ = ["PENETRATION_TOLERANCE", "DEFAULT_FRICTION", "Sphere", "Capsule", "GraspedObject", "PAPER_BALL",
+           "ContactSettings"]
