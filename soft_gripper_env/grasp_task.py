@@ -354,11 +354,12 @@ class GraspBatch:
 
     @property
     def finger_gap(self) -> np.ndarray:
-        """Distance from each finger's nearest node to the object's surface [m], (B, F); 0 in contact."""
+        """Distance from each finger's surface to the object's, at its nearest node [m], (B, F); 0 in contact."""
         nodes = self.sim.world_positions(self.state)  # (B, F, N, 3)
         radius = np.array([scene.grasped_object.radius for scene in self.sim.scenes])
-        distance = np.linalg.norm(nodes - self.object_position[:, None, None, :], axis=-1).min(axis=2)
-        return np.maximum(distance - radius[:, None], 0.0)
+        distance = np.linalg.norm(nodes - self.object_position[:, None, None, :], axis=-1) \
+            - self.sim.finger_contact_radius
+        return np.maximum(distance.min(axis=2) - radius[:, None], 0.0)
 
     @property
     def is_success(self) -> np.ndarray:

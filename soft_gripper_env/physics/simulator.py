@@ -160,7 +160,7 @@ class Simulator:
         """Each gripper's scene: they differ at most in the grasped object's size, place, density and velocity,
         and in the water's current (:meth:`set_scene`)."""
         self.disc = disc = scene.discretization()
-        R, D, F = self.n_rods, disc.dim, self.n_fingers
+        R, D, F, N = self.n_rods, disc.dim, self.n_fingers, disc.n_nodes
         self._integrator = INTEGRATORS[scene.integrator]
         self._subsimulators: dict[int, Simulator] = {}
         self._tolerance_inverse = np.where(disc.free, 1.0 / disc.residual_scale, 0.0)
@@ -186,11 +186,14 @@ class Simulator:
         if obj is not None and obj.free:
             self._body = BodyModel(BodyLoads.total(scene.forces, scene.fluid), B, scene.contact)
             any_motion = np.tile(np.eye(6), (B, 1, 1)) if scene.model == "3d" else np.empty((0, 6, 6))
-            self._geometry = ContactGeometry(np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), directions,
-                                             plane_normals, any_motion)
         else:  # rods on their own or against a fixed object: no body moves, and none is held to
-            self._geometry = ContactGeometry(np.zeros((R, D)), np.zeros((R, D)), np.zeros(R), directions,
-                                             plane_normals, np.empty((0, 6, 6)))
+            any_motion = np.empty((0, 6, 6))
+        self.finger_contact_radius = disc.node_radius.copy() if scene.contact.finger_thickness else np.zeros(N)
+        """The finger's radius at each node that contact adds to the object's [m], (N,): the radius profile, or
+        zeros for contact on the centre lines (``ContactSettings.finger_thickness``)."""
+        self._geometry = ContactGeometry(np.zeros((R, D)), np.zeros((R, D)), np.zeros((R, N)),
+                                         self.finger_contact_radius,
+                                         directions, plane_normals, any_motion)
         # the current moves what feels it: the rods' drag, and a free body's drag and the water's inertia on it
         body_loads = None if self._body is None else self._body.loads
         moving_water = self._force_terms.drag_normal.size > 0 or (body_loads is not None and (
@@ -234,7 +237,7 @@ class Simulator:
             rods = slice(index * self.n_fingers, (index + 1) * self.n_fingers)
             geometry = self._geometry
             geometry.starts[rods], geometry.ends[rods], geometry.radii[rods] = object_in_rod_frames(
-                obj, self.disc.finger_directions, scene.model == "planar")
+                obj, self.disc.finger_directions, self.finger_contact_radius, scene.model == "planar")
 
     @property
     def n_rods(self) -> int:

@@ -22,8 +22,8 @@ from soft_gripper_env.physics.kernels.contact import object_in_rod_frames, withi
 
 
 def reachable(obj, finger_directions, length, planar):
-    """Which fingers the corrector searches for contact with ``obj``."""
-    return within_reach(*object_in_rod_frames(obj, finger_directions, planar), length)
+    """Which fingers the corrector searches for contact with ``obj`` (on the fingers' centre lines)."""
+    return within_reach(*object_in_rod_frames(obj, finger_directions, np.zeros(20), planar), length)
 
 
 def segment_distance(points, start, end):
@@ -220,3 +220,55 @@ def test_fingers_close_on_a_horizontal_capsule():
     last = run.contacts[-1]
     mirror = np.array([1.0, -1.0, 1.0])
     np.testing.assert_allclose(last.reaction[0, 1], last.reaction[0, 2] * mirror, atol=1e-8)
+
+
+def _surface_run(model, material=ELASTOSIL_MA_4601, variable_stiffness=False, center=(0.0, 0.0, -0.12)):
+    """The paper's ramp closing on a fixed sphere with contact on the fingers' surfaces."""
+    scene = paper_scene(model, material=material, variable_stiffness=variable_stiffness,
+                        grasped_object=Sphere(0.04, center))
+    scene = replace(scene, contact=ContactSettings(finger_thickness=True))
+    return scene, run_ramp(scene)
+
+
+@pytest.mark.parametrize("variable_stiffness", [False, True])
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_contact_is_between_the_fingers_surface_and_the_objects(model, variable_stiffness):
+    """With ``finger_thickness``, no free node's centre line comes closer to the sphere than its radius plus the
+    finger's radius at that node (the radius profile, 20 mm at the base to 1 mm at the tip with variable
+    stiffness), and held nodes lie on that offset surface."""
+    scene, run = _surface_run(model, variable_stiffness=variable_stiffness)
+    finger_radius = scene.discretization().node_radius
+    center = np.asarray(scene.grasped_object.center)
+    clearance = np.linalg.norm(run.positions - center, axis=-1) - (0.04 + finger_radius)
+    held_any = False
+    for k, report in enumerate(run.contacts):
+        assert clearance[k + 1][:, :, 2:].min() >= -PENETRATION_TOLERANCE
+        if report.held.any():
+            held_any = True
+            assert np.abs(clearance[k + 1][report.held]).max() < 1e-3  # held on the surface, up to the step's slip
+        assert np.all(report.normal_reaction[report.held] >= 0.0)
+    assert held_any
+    assert run.converged.all()
+
+
+def test_planar_and_3d_agree_with_surface_contact_on_the_axis():
+    """A sphere on the gripper's axis makes the scene planar: both models give the same motion and reactions."""
+    _, planar = _surface_run("planar")
+    _, spatial = _surface_run("3d")
+    assert np.abs(planar.positions - spatial.positions).max() <= 1e-6
+    for a, b in zip(planar.contacts, spatial.contacts, strict=True):
+        np.testing.assert_array_equal(a.held, b.held)
+        np.testing.assert_allclose(a.reaction, b.reaction, atol=1e-4)
+
+
+def test_a_planar_finger_touches_an_off_plane_sphere_where_its_surface_does():
+    """In the planar model node i meets a sphere of radius R whose centre is d from the finger's plane on the
+    circle of radius √((R + r_i)² − d²): the section of the sphere grown by the finger's radius."""
+    radius, offset = 0.05, 0.03
+    directions = np.array([[1.0, 0.0, 0.0]])
+    finger_radius = np.linspace(0.02, 0.001, 20)
+    starts, ends, radii = object_in_rod_frames(Sphere(radius, (0.1, offset, -0.1)), directions, finger_radius, True)
+    np.testing.assert_allclose(radii[0], np.sqrt((radius + finger_radius) ** 2 - offset**2), rtol=1e-14)
+    np.testing.assert_array_equal(starts, [[0.1, -0.1]])
+    _, _, on_centre_line = object_in_rod_frames(Sphere(radius, (0.1, offset, -0.1)), directions, np.zeros(20), True)
+    np.testing.assert_allclose(on_centre_line[0], math.sqrt(radius**2 - offset**2), rtol=1e-14)

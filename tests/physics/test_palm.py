@@ -100,11 +100,12 @@ def test_the_body_jacobian_with_palm_friction_matches_finite_differences(frictio
 
 
 def _floating_sphere_in_a_current(friction):
-    """A buoyant sphere pressed up against the palm, at the axis, with a 5 cm/s current along x; 2 s."""
+    """A buoyant sphere pressed up against the palm, at the axis, with a 5 cm/s current along x; 2 s. The fingers
+    lie in the palm's plane at first; contact on their centre lines keeps them off the sphere."""
     sphere = Sphere(RADIUS, (0.0, 0.0, -RADIUS), density=DENSITY)
     scene = paper_scene("3d", medium="water", grasped_object=sphere)
     scene = replace(scene, fluid=Fluid(current=Current((0.05, 0.0, 0.0))),
-                    contact=ContactSettings(palm_friction=friction, palm_radius=1.0))
+                    contact=ContactSettings(palm_friction=friction, palm_radius=1.0, finger_thickness=False))
     sim = Simulator(scene)
     state = sim.initial_state()
     for _ in range(200):

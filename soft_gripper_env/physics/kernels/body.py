@@ -419,12 +419,14 @@ def planar_body_basis(held, plane_normals):
 
 
 @njit(cache=True, error_model="numpy")
-def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finger_directions, plane_normals, starts,
-                       ends, radii):
+def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finger_radius, finger_directions,
+                       plane_normals, starts, ends, radii):
     """Each gripper's free body (centre ``c`` (B, 3), ``orientation`` (B, 3, 3), segment ends in its frame (B, 3)
-    each, ``radius`` (B,)) as each of its rods sees it: the segment's ends (R, D) and radius (R,), written into
-    ``starts``, ``ends`` and ``radii``. In 3-D, world coordinates. A planar finger sees the section of the sphere by
-    its vertical plane: a circle centred (c·d, c_z) in the plane's (s, z), of radius √(R² − (c·n)²)."""
+    each, ``radius`` (B,)) as each of its rods sees it: the segment's ends (R, D), written into ``starts`` and
+    ``ends``, and for every node the radius its centre line touches at (R, N), written into ``radii``: the body's
+    plus the finger's own there, ``finger_radius`` (N,) (zeros for contact on the centre lines). In 3-D, world
+    coordinates. A planar finger sees the section by its vertical plane: a circle centred (c·d, c_z) in the plane's
+    (s, z), of radius √((R + r_i)² − (c·n)²) for node i."""
     n_fingers = finger_directions.shape[0]
     dim = starts.shape[1]
     for b in range(c.shape[0]):
@@ -437,7 +439,8 @@ def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finge
                     for j in range(3):
                         starts[r, k] += orientation[b, k, j] * segment_start[b, j]
                         ends[r, k] += orientation[b, k, j] * segment_end[b, j]
-                radii[r] = radius[b]
+                for i in range(finger_radius.size):
+                    radii[r, i] = radius[b] + finger_radius[i]
             else:
                 along = 0.0
                 across = 0.0
@@ -446,7 +449,8 @@ def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finge
                     across += c[b, k] * plane_normals[f, k]
                 starts[r, 0] = ends[r, 0] = along
                 starts[r, 1] = ends[r, 1] = c[b, 2]
-                radii[r] = math.sqrt(max(radius[b] ** 2 - across**2, 0.0))
+                for i in range(finger_radius.size):
+                    radii[r, i] = math.sqrt(max((radius[b] + finger_radius[i]) ** 2 - across**2, 0.0))
 
 
 __all__ = ["BodyArrays", "BodyState", "BodyMotion", "palm_reactions", "body_residual", "turned", "admissible_rotation",

@@ -2,12 +2,15 @@
 of a reaction. The corrector that uses them is :mod:`..solvers.corrector`; ``docs/contact.md`` describes the method.
 
 An object is a capsule, the points within a radius of a segment (a sphere is a capsule of zero length), so one set
-of kernels serves both. Contact is node-based: an edge between two nodes outside the object may still cut through
-it, by at most the sag of an edge of length Δl over the object's curvature, Δl²/(8·R) (0.07 mm for the paper's
-finger and ball).
+of kernels serves both. Contact is between the object's surface and the finger's: node i of a finger of radius
+r_i touches an object of radius R when its centre line is R + r_i from the object's segment
+(``ContactSettings.finger_thickness``; without it, as in the paper, the centre line itself touches). Contact is
+node-based: the surface between two nodes outside the object may still cut into it, by at most the sag of an edge
+of length Δl over the curvature, Δl²/(8·(R + r)) (0.07 mm for the paper's finger and ball on the centre line).
 
 In the planar model a finger sees the object's section by its own vertical plane: a sphere of radius R whose centre
-is a distance d from the plane is a circle of radius √(R² − d²) there.
+is a distance d from the plane is a circle of radius √(R² − d²) there, and node i touches it at √((R + r_i)² − d²)
+from its centre.
 """
 
 from __future__ import annotations
@@ -29,28 +32,32 @@ class ObjectView(NamedTuple):
     ends: np.ndarray
     """The other end [m], (R, D)."""
     radii: np.ndarray
-    """The object's radius as the rod sees it [m], (R,)."""
+    """The distance from the object's segment at which each node's centre line touches it [m], (R, N): the
+    object's radius as the rod sees it plus the finger's radius at the node (:func:`object_in_rod_frames`)."""
     searched: np.ndarray
     """Whether the rod can reach the object at all, (R,) bool (:func:`within_reach`)."""
     shift: np.ndarray
     """The object's displacement over the step [m], (R, D); zero for a fixed object."""
 
 
-def object_in_rod_frames(obj: GraspedObject, finger_directions: np.ndarray,
+def object_in_rod_frames(obj: GraspedObject, finger_directions: np.ndarray, finger_radius: np.ndarray,
                          planar: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The object as each finger's rod sees it: its segment's ends (F, D) and (F, D), and its radius (F,) [m].
+    """The object as each finger's rod sees it: its segment's ends (F, D) and (F, D), and the distance from the
+    segment at which each node's centre line touches it, (F, N) [m]: the object's radius plus the finger's at the
+    node, ``finger_radius`` (N,) (zeros for contact on the centre lines).
 
     In 3-D that is the object itself. In the planar model a sphere's section by the finger's plane is a circle (a
     segment of zero length); see the module notes.
     """
     start, end = obj.segment
     n_fingers = len(finger_directions)
+    reach = obj.radius + np.asarray(finger_radius, dtype=float)
     if not planar:
-        return np.tile(start, (n_fingers, 1)), np.tile(end, (n_fingers, 1)), np.full(n_fingers, obj.radius)
+        return np.tile(start, (n_fingers, 1)), np.tile(end, (n_fingers, 1)), np.tile(reach, (n_fingers, 1))
     center = start  # a sphere: the planar model refuses a capsule (Scene validation)
     plane_normals = np.stack([-finger_directions[:, 1], finger_directions[:, 0], np.zeros(n_fingers)], axis=1)
     distance = plane_normals @ center
-    radius = np.sqrt(np.maximum(obj.radius**2 - distance**2, 0.0))
+    radius = np.sqrt(np.maximum(reach[None, :] ** 2 - distance[:, None] ** 2, 0.0))
     centers = np.stack([finger_directions @ center, np.full(n_fingers, center[2])], axis=1)
     return centers, centers, radius
 
@@ -74,15 +81,16 @@ def normal_reactions(positions, reactions, starts, ends):
 
 @njit(cache=True, error_model="numpy")
 def within_reach(starts, ends, radii, length):
-    """Which rods (R,) can touch an object given as they see it (segment ends (R, D), radius (R,)): the object
-    must exist in the rod's frame (radius > 0) and its segment lie within ``length`` + radius of the palm, the
-    rods' origin."""
+    """Which rods (R,) can touch an object given as they see it (segment ends (R, D), touching distances (R, N)):
+    the object must exist in the rod's frame (some distance > 0) and its segment lie within ``length`` plus the
+    largest distance of the palm, the rods' origin."""
     n_rods, dim = starts.shape
     reach = np.empty(n_rods, dtype=np.bool_)
     palm = np.zeros(dim)
     nearest = np.empty(dim)
     for r in range(n_rods):
-        reach[r] = radii[r] > 0.0 and _distance_to_segment(palm, starts[r], ends[r], nearest) < length + radii[r]
+        largest = radii[r].max()
+        reach[r] = largest > 0.0 and _distance_to_segment(palm, starts[r], ends[r], nearest) < length + largest
     return reach
 
 
@@ -106,7 +114,8 @@ def _distance_to_segment(point, start, end, nearest):
 @njit(cache=True, error_model="numpy")
 def find_penetrations(positions, old_positions, view, held, first_free_node, tolerance, new_hold, hold_at):
     """Marks in ``new_hold`` (R, N) every free node from ``first_free_node`` on of a searched rod that lies inside its
-    object (``view``, :class:`ObjectView`: the points within ``radii`` of the segment ``starts``–``ends``) by more
+    object (``view``, :class:`ObjectView`: for node i of rod r, the points within ``radii[r, i]`` of the segment
+    ``starts``–``ends``, so that the finger's surface, not its centre line, touches the object's) by more
     than ``tolerance`` [m], and writes where it is held into ``hold_at`` (R, N, D): the point where its path over the
     step, relative to the object, entered the surface. ``old_positions`` (R, N, D) are the nodes at the start of the
     step and ``view.shift`` (R, D) the object's displacement over it. A node already inside at the start is
@@ -120,9 +129,9 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
     for r in range(n_rods):
         if not searched[r]:
             continue
-        radius = radii[r]
         for i in range(first_free_node, n_nodes):
-            if held[r, i]:
+            radius = radii[r, i]
+            if held[r, i] or radius <= 0.0:
                 continue
             distance = _distance_to_segment(positions[r, i], starts[r], ends[r], nearest)
             if not (distance < radius - tolerance and distance > 0.0):

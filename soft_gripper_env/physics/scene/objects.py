@@ -129,6 +129,10 @@ class ContactSettings:
     switched on at first touch would be a jump in force."""
     palm_friction: float = DEFAULT_FRICTION
     """Coulomb friction coefficient μ between the palm and the object (dimensionless); 0 is frictionless."""
+    finger_thickness: bool = True
+    """Contact between the fingers' surfaces and the object's: node i touches at the object's radius plus the
+    finger's radius there (its radius profile, so a variable-stiffness finger too). False puts contact on the
+    fingers' centre lines, as the paper does (:func:`~.scene.paper_scene` keeps that for its figures)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_corrector_iterations, (int, np.integer)) or \
@@ -139,6 +143,8 @@ class ContactSettings:
         check_range("ContactSettings", "palm_radius", self.palm_radius, "m", 0.0, 10.0, low_inclusive=True)
         check_range("ContactSettings", "palm_damping_depth", self.palm_damping_depth, "m", 0.0, 1.0,
                     low_inclusive=True)
+        if not isinstance(self.finger_thickness, (bool, np.bool_)):
+            raise ValueError(f"ContactSettings.finger_thickness = {self.finger_thickness!r} must be True or False")
         check_range("ContactSettings", "palm_friction", self.palm_friction, "(dimensionless)", 0.0, 1e6,
                     low_inclusive=True)
 

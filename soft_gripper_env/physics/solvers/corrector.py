@@ -42,7 +42,11 @@ class ContactGeometry(NamedTuple):
     ends: np.ndarray
     """The other end [m], (R, D)."""
     radii: np.ndarray
-    """The object's radius as each rod sees it [m], (R,)."""
+    """The distance from the segment at which each node's centre line touches the object [m], (R, N)
+    (:class:`~..kernels.contact.ObjectView`)."""
+    finger_radius: np.ndarray
+    """Each node's finger radius that contact adds to the object's [m], (N,): zeros for contact on the centre
+    lines."""
     finger_directions: np.ndarray
     """Unit radial direction of each finger, (F, 3)."""
     plane_normals: np.ndarray
@@ -151,8 +155,8 @@ def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shi
     for b in range(c.shape[0]):
         turned(motion.rotation[b], motion.old.orientation[b], rotation, motion.orientation[b])
     body_in_rod_frames(c, motion.orientation, body.segment_start, body.segment_end, body.radius,
-                       geometry.finger_directions, geometry.plane_normals, geometry.starts, geometry.ends,
-                       geometry.radii)
+                       geometry.finger_radius, geometry.finger_directions, geometry.plane_normals, geometry.starts,
+                       geometry.ends, geometry.radii)
     projection = holds.projection
     for r in range(shift.shape[0]):
         b = r // solver.n_fingers
