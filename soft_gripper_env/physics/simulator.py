@@ -28,7 +28,7 @@ from .scene.fluid import Current, CurrentBatch
 from .scene.forces import BodyLoads, ForceTerms
 from .scene.objects import ContactSettings
 from .scene.scene import NATURAL_CURVATURE_LIMIT, Scene
-from .solvers.corrector import ContactGeometry, release_held, solve_with_contact
+from .solvers.corrector import ContactGeometry, contact_masks, solve_with_contact
 from .solvers.integrators import INTEGRATORS
 from .solvers.newton import (
     Holds,
@@ -192,7 +192,7 @@ class Simulator:
         """The finger's radius at each node that contact adds to the object's [m], (N,): the radius profile, or
         zeros for contact on the centre lines (``ContactSettings.finger_thickness``)."""
         self._geometry = ContactGeometry(np.zeros((R, D)), np.zeros((R, D)), np.zeros((R, N)),
-                                         self.finger_contact_radius,
+                                         self.finger_contact_radius, np.full(R, np.inf),
                                          directions, plane_normals, any_motion)
         # the current moves what feels it: the rods' drag, and a free body's drag and the water's inertia on it
         body_loads = None if self._body is None else self._body.loads
@@ -238,6 +238,8 @@ class Simulator:
             geometry = self._geometry
             geometry.starts[rods], geometry.ends[rods], geometry.radii[rods] = object_in_rod_frames(
                 obj, self.disc.finger_directions, self.finger_contact_radius, scene.model == "planar")
+        if obj is not None:
+            self._geometry.friction[index * self.n_fingers:(index + 1) * self.n_fingers] = obj.friction
 
     @property
     def n_rods(self) -> int:
@@ -439,9 +441,9 @@ class Simulator:
         disc = self.disc
         if not held.any():
             return self._clamp_free  # never written to
-        free = self._clamp_free.copy()
-        release_held(free, held, disc.dim)
-        return free
+        free, measured = np.empty_like(self._clamp_free), np.empty_like(self._clamp_free)
+        contact_masks(self._clamp_free, held, np.zeros_like(held), disc.dim, free, measured)
+        return measured
 
     def _per_step(self, dt: float) -> tuple:
         """The solvers' settings for steps of ``dt`` (:class:`~.solvers.newton.SolverArrays`, as plain fields for the
@@ -495,7 +497,8 @@ class Simulator:
             result = SolveResult(np.empty(R, dtype=bool), np.empty(R, dtype=np.int64), np.empty(R),
                                  np.empty((R, disc.n_dofs)), np.zeros(R, dtype=np.int64), np.zeros(R, dtype=bool))
             predict(q_old, v_old, acceleration_old, dt, step.q_pred, q)
-            held, body = self._run_corrector(state, q, step, rods, solver, result)
+            holds, body = self._run_corrector(state, q, step, rods, solver, result)
+            held = holds.held
             finish(q, q_old, v_old, dt, velocity.reshape(R, N, S), acceleration.reshape(R, N, S))
             summary = per_gripper(result.converged, result.iterations, result.ratio, self.n_fingers)
         if midpoint and not end_in_kernel:
@@ -521,10 +524,11 @@ class Simulator:
         contact = None
         if held is not None:
             reaction = np.zeros((R, N, S))
-            reaction[..., :D] = result.residual.reshape(R, N, S)[..., :D] * held[..., None]
+            reaction[..., :D] = result.residual.reshape(R, N, S)[..., :D] * held[..., None] + holds.friction
             geometry = self._geometry  # the object as each rod sees it at the solution
             contact = ContactReport(
                 held=held.reshape(B, F, N),
+                sliding=holds.sliding.reshape(B, F, N),
                 reaction=disc.world_positions(reaction.reshape(B, F, N, S)),
                 normal_reaction=normal_reactions(q[..., :D], reaction[..., :D], geometry.starts,
                                                  geometry.ends).reshape(B, F, N),
@@ -543,14 +547,20 @@ class Simulator:
         and a new hold keeps its offset in the body's frame; each re-solve starts from the last solution, so Newton
         starts a few penetration depths from the new one (restarting from the predictor would start a hold far from
         a body that the impact has slowed, a jump the 3-D coupled solve did not always survive). Returns the holds
-        (R, N) and, with a free body, its hold offsets and new state (else None)."""
+        (:class:`~.solvers.newton.Holds`: which nodes are held and slide, and their friction) and, with a free body,
+        its hold offsets and new state (else None). A node that slid holds where it ended, stuck, at the next
+        step's start."""
         R, N, D = self.n_rods, self.disc.n_nodes, self.disc.dim
         held = state.held.reshape(R, N).copy() if state.held is not None else np.zeros((R, N), dtype=bool)
-        hold_at = step.q_old[..., :D].copy()  # nodes already held stay where they are
+        hold_at = step.q_old[..., :D].copy()  # nodes already held stay where they are, stuck at first
         dt = step.dt
+        geometry = self._geometry
+        contact = (np.zeros((R, N), dtype=bool), np.zeros((R, N, D)), np.empty_like(self._clamp_free),
+                   geometry.starts, geometry.ends, geometry.radii, geometry.finger_radius)  # sliding, friction,
+        # measured, and the object
         if self._body is None:
             free_body = None
-            holds = Holds(held, np.empty((0, 0, 3)), self._projection)
+            holds = Holds(held, np.empty((0, 0, 3)), self._projection, *contact)
         else:
             old = BodyState(*(np.ascontiguousarray(x) for x in (state.body_position, state.body_velocity,
                                                                 state.body_orientation,
@@ -562,13 +572,13 @@ class Simulator:
                                 np.empty((self.batch_size, 3, 3)), old, self._water(state.time)[0],
                                 water_acceleration)  # the predictor
             free_body = (body, plain(motion))
-            holds = Holds(held, state.hold_offset.reshape(R, N, 3).copy(), self._projection)
+            holds = Holds(held, state.hold_offset.reshape(R, N, 3).copy(), self._projection, *contact)
         solve_with_contact(q, tuple(step), rods, self._plain_terms, solver, tuple(holds), hold_at,
                            self._plain_geometry, free_body, tuple(result))
         if self._body is None:
-            return held, None
+            return holds, None
         c, theta = motion.position, motion.rotation
-        return held, (holds.offsets, c, (c - motion.old.position) / dt, motion.orientation, theta / dt)
+        return holds, (holds.offsets, c, (c - motion.old.position) / dt, motion.orientation, theta / dt)
 
 
 def _structure(scene: Scene) -> tuple:

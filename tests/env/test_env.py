@@ -331,11 +331,11 @@ def test_reactive_policy_closes_until_caged_then_squeezes_by_curvature():
 
 
 def test_reactive_grasp_succeeds_after_a_one_second_hold():
-    """Seed 1002 is one the reactive controller grasps: is_success turns on once the hold has lasted 1 s, not
-    before, and the hold clock in info explains it."""
+    """Seed 1013 is one the reactive controller grasps (with friction it holds on about 1 seed in 10): is_success
+    turns on once the hold has lasted 1 s, not before, and the hold clock in info explains it."""
     env = gym.make(ENV_ID)
     policy = ReactivePolicy()
-    obs, info = env.reset(seed=1002)
+    obs, info = env.reset(seed=1013)
     flags, holds = [], []
     done = False
     while not done:

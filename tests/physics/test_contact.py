@@ -191,9 +191,11 @@ def test_scripted_ramp_saturates_at_the_curvature_limit():
     assert run.converged.all() and np.isfinite(run.positions).all()
 
 
-def test_a_capsule_of_zero_length_is_the_sphere():
-    ball = paper_scene("3d", grasped_object=PAPER_BALL)
-    pill = replace(ball, grasped_object=Capsule(PAPER_BALL.radius, PAPER_BALL.center, PAPER_BALL.center))
+@pytest.mark.parametrize("friction", [math.inf, 0.3])
+def test_a_capsule_of_zero_length_is_the_sphere(friction):
+    ball = paper_scene("3d", grasped_object=replace(PAPER_BALL, friction=friction))
+    pill = replace(ball, grasped_object=Capsule(PAPER_BALL.radius, PAPER_BALL.center, PAPER_BALL.center,
+                                                friction=friction))
     a, b = run_ramp(ball), run_ramp(pill)
     np.testing.assert_array_equal(a.positions, b.positions)
     for x, y in zip(a.contacts, b.contacts, strict=True):
@@ -272,3 +274,111 @@ def test_a_planar_finger_touches_an_off_plane_sphere_where_its_surface_does():
     np.testing.assert_array_equal(starts, [[0.1, -0.1]])
     _, _, on_centre_line = object_in_rod_frames(Sphere(radius, (0.1, offset, -0.1)), directions, np.zeros(20), True)
     np.testing.assert_allclose(on_centre_line[0], math.sqrt(radius**2 - offset**2), rtol=1e-14)
+
+
+@pytest.fixture(scope="module")
+def friction_runs():
+    """The paper's ramp on its fixed ball with stick contact and with Coulomb friction of several μ, planar and
+    3-D."""
+    return {(model, mu): run_ramp(paper_scene(model, grasped_object=replace(PAPER_BALL, friction=mu)))
+            for model in ("planar", "3d") for mu in (math.inf, 1.0, 0.3, 0.0)}
+
+
+def _cone(report):
+    """Normal and tangential parts of every held node's reaction [N], and whether it slides."""
+    normal = report.normal_reaction[report.held]
+    tangential = np.sqrt(np.maximum(np.sum(report.reaction[report.held] ** 2, axis=-1) - normal**2, 0.0))
+    return normal, tangential, report.sliding[report.held]
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_contacts_obey_coulombs_law(friction_runs, model):
+    """Every stuck contact lies inside the friction cone, |R_t| ≤ μ·R_n (to Newton's force tolerance), and every
+    sliding one on its rim, |R_t| = μ·R_n within 1 %, for μ = 1, 0.3 and 0 (frictionless: no tangential
+    reaction at all). Every step converges and resolves."""
+    for mu in (1.0, 0.3, 0.0):
+        run = friction_runs[(model, mu)]
+        assert run.converged.all()
+        slid = 0
+        for report in run.contacts:
+            assert report.resolved.all()
+            normal, tangential, sliding = _cone(report)
+            assert np.all(normal >= 0.0)
+            assert np.all(tangential[~sliding] <= mu * normal[~sliding] + 1e-6)
+            np.testing.assert_allclose(tangential[sliding], mu * normal[sliding], rtol=0.01, atol=1e-6)
+            slid += int(sliding.sum())
+        assert slid > 0  # the ball's contacts do slide at these μ
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_slip_starts_where_the_tangential_reaction_reaches_mu_times_the_normal(friction_runs, model):
+    """With stick contact the largest ratio of tangential to normal reaction over the run is μ*. Just above it
+    (1.02·μ*) nothing slides and the run is the stuck one exactly; just below (0.98·μ*) a contact slides."""
+    stuck = friction_runs[(model, math.inf)]
+    ratios = [t / n for report in stuck.contacts for n, t, _ in [_cone(report)] for n, t in zip(n, t, strict=True)
+              if n > 1e-3]
+    critical = max(ratios)
+    above = run_ramp(paper_scene(model, grasped_object=replace(PAPER_BALL, friction=1.02 * critical)))
+    np.testing.assert_array_equal(above.positions, stuck.positions)
+    assert not any(report.sliding.any() for report in above.contacts)
+    below = run_ramp(paper_scene(model, grasped_object=replace(PAPER_BALL, friction=0.98 * critical)))
+    assert any(report.sliding.any() for report in below.contacts)
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_friction_never_adds_energy(friction_runs, model):
+    """On a fixed object, the friction on every sliding node opposes its motion over the step: its work is never
+    positive."""
+    for mu in (1.0, 0.3):
+        run = friction_runs[(model, mu)]
+        worked = 0
+        for k, report in enumerate(run.contacts):
+            if not report.sliding.any():
+                continue
+            motion = run.positions[k + 1] - run.positions[k]
+            reaction = report.reaction
+            normal = report.normal_reaction
+            positions = run.positions[k + 1]
+            outward = positions - np.asarray(PAPER_BALL.center)
+            outward /= np.linalg.norm(outward, axis=-1, keepdims=True)
+            friction = reaction - normal[..., None] * outward
+            work = np.sum(friction * motion, axis=-1)[report.sliding]
+            assert np.all(work <= 1e-12)
+            worked += int((work < 0).sum())
+        assert worked > 0
+
+
+@pytest.mark.parametrize("stride, dim", [(2, 2), (4, 3)])
+def test_a_sliding_nodes_frame_turns_its_band_exactly(stride, dim):
+    """A sliding node is solved in its surface's frame: the band of a rod's symmetric Newton matrix (nodes coupled
+    to two neighbours each side) becomes Tᵀ·A·T, T the identity but for the node's orthonormal basis (first column
+    the normal), against the dense product; nothing falls outside the band."""
+    from soft_gripper_env.physics.kernels.contact import rotate_node, tangent_basis
+
+    rng = np.random.default_rng(3)
+    n_nodes = 8
+    n, kd = n_nodes * stride, 3 * stride - 1
+    dense = np.zeros((n, n))
+    for i in range(n_nodes):
+        for j in range(max(0, i - 2), min(n_nodes, i + 3)):
+            dense[i * stride:(i + 1) * stride, j * stride:(j + 1) * stride] += rng.normal(size=(stride, stride))
+    dense += dense.T
+    band = np.zeros((n, kd + 1))
+    for i in range(n):
+        for j in range(max(0, i - kd), i + 1):
+            band[i, kd - i + j] = dense[i, j]
+    normal = rng.normal(size=dim)
+    normal /= np.linalg.norm(normal)
+    basis = np.empty((dim, dim))
+    tangent_basis(normal, basis)
+    np.testing.assert_allclose(basis.T @ basis, np.eye(dim), atol=1e-15)
+    np.testing.assert_array_equal(basis[:, 0], normal)
+    first = 3 * stride
+    turn = np.eye(n)
+    turn[first:first + dim, first:first + dim] = basis
+    expected = turn.T @ dense @ turn
+    rotate_node(band, first, basis)
+    for i in range(n):
+        for j in range(max(0, i - kd), i + 1):
+            assert band[i, kd - i + j] == pytest.approx(expected[i, j], abs=1e-13)
+    assert np.abs(np.tril(expected, -kd - 1)).max() == 0.0

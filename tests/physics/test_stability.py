@@ -1,5 +1,6 @@
 """Hard cases: each completes with no NaN and a documented outcome (docs/speed_vs_error.md, "Stability")."""
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -130,24 +131,27 @@ def test_symplectic_integrators_keep_the_energy_bounded_without_drag(integrator)
     assert np.abs(energy - energy[0]).max() <= 0.02 * scale
 
 
+@pytest.mark.parametrize("friction", [math.inf, 0.3])
 @pytest.mark.parametrize("model", ["planar", "3d"])
 @pytest.mark.parametrize("time_step", [0.02, 0.05])
-def test_grasp_in_water_at_large_steps(model, time_step):
-    """Fingers close on a free sphere in water (κ̄ = −0.6·t, held at −0.25) at 2 and 5 times the RL step: every step
-    converges, no node is left inside the sphere, and all three fingers hold it at the end (before the coupled
-    solve's line search, this diverged at Δt ≥ 0.02 s)."""
+def test_grasp_in_water_at_large_steps(model, time_step, friction):
+    """Fingers close on a free sphere in water (κ̄ = −0.6·t, held at −0.25) at 2 and 5 times the physics step:
+    every step converges and resolves, and no node is left inside the sphere (before the coupled solve's line search,
+    this diverged at Δt ≥ 0.02 s). Stuck contact holds the sphere to the end; with μ = 0.3 it slides out of this
+    loose grasp, as it should."""
     from soft_gripper_env.physics import PENETRATION_TOLERANCE, Sphere
 
-    sphere = Sphere(0.05, (0.0, 0.0, -0.1), density=1100.0)
+    sphere = Sphere(0.05, (0.0, 0.0, -0.1), density=1100.0, friction=friction)
     scene = replace(paper_scene(model, medium="water", grasped_object=sphere), time_step=time_step)
     sim = Simulator(scene)
     state = sim.initial_state()
     for _ in range(int(round(1.5 / time_step))):
         result = sim.step(state, max(-0.6 * state.time, -0.25))
-        assert result.converged.all()
+        assert result.converged.all() and result.contact.resolved.all()
         state = result.state
         assert np.isfinite(state.q).all() and np.isfinite(state.body_position).all()
         distance = np.linalg.norm(sim.world_positions(state)[:, :, 2:] - state.body_position[:, None, None, :],
                                   axis=-1)
         assert distance.min() >= sphere.radius - PENETRATION_TOLERANCE
-    assert state.held[0].any(axis=1).all()
+    if friction == math.inf:
+        assert state.held[0].any(axis=1).all()

@@ -71,7 +71,7 @@ def normal_reactions(positions, reactions, starts, ends):
     nearest = np.empty(dim)
     for r in range(n_rods):
         for i in range(n_nodes):
-            distance = _distance_to_segment(positions[r, i], starts[r], ends[r], nearest)
+            distance = distance_to_segment(positions[r, i], starts[r], ends[r], nearest)
             along = 0.0
             for k in range(dim):
                 along += reactions[r, i, k] * (positions[r, i, k] - nearest[k])
@@ -90,12 +90,12 @@ def within_reach(starts, ends, radii, length):
     nearest = np.empty(dim)
     for r in range(n_rods):
         largest = radii[r].max()
-        reach[r] = largest > 0.0 and _distance_to_segment(palm, starts[r], ends[r], nearest) < length + largest
+        reach[r] = largest > 0.0 and distance_to_segment(palm, starts[r], ends[r], nearest) < length + largest
     return reach
 
 
 @njit(cache=True, error_model="numpy")
-def _distance_to_segment(point, start, end, nearest):
+def distance_to_segment(point, start, end, nearest):
     """Distance from ``point`` to the segment start–end; writes the segment's nearest point into ``nearest``."""
     dim = point.size
     length2 = 0.0
@@ -133,25 +133,25 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
             radius = radii[r, i]
             if held[r, i] or radius <= 0.0:
                 continue
-            distance = _distance_to_segment(positions[r, i], starts[r], ends[r], nearest)
+            distance = distance_to_segment(positions[r, i], starts[r], ends[r], nearest)
             if not (distance < radius - tolerance and distance > 0.0):
                 continue
             for k in range(dim):
                 begin[k] = old_positions[r, i, k] + shifts[r, k]  # the start of the path, relative to the object
                 point[k] = positions[r, i, k]
-            if _distance_to_segment(begin, starts[r], ends[r], nearest) > radius:
+            if distance_to_segment(begin, starts[r], ends[r], nearest) > radius:
                 low, high = 0.0, 1.0  # bisect for the entry: outside at `low`, inside at `high`
                 for _ in range(40):
                     middle = 0.5 * (low + high)
                     for k in range(dim):
                         point[k] = begin[k] + middle * (positions[r, i, k] - begin[k])
-                    if _distance_to_segment(point, starts[r], ends[r], nearest) > radius:
+                    if distance_to_segment(point, starts[r], ends[r], nearest) > radius:
                         low = middle
                     else:
                         high = middle
                 for k in range(dim):
                     point[k] = begin[k] + low * (positions[r, i, k] - begin[k])
-            distance = _distance_to_segment(point, starts[r], ends[r], nearest)
+            distance = distance_to_segment(point, starts[r], ends[r], nearest)
             if distance == 0.0:
                 continue
             new_hold[r, i] = True
@@ -161,4 +161,93 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
     return found
 
 
-__all__ = ["ObjectView", "object_in_rod_frames", "normal_reactions", "within_reach", "find_penetrations"]
+@njit(cache=True, error_model="numpy")
+def onto_surface(point, start, end, radius, normal):
+    """Moves ``point`` (D,) in place along the normal to the surface at ``radius`` from the segment start–end, and
+    writes that outward unit normal into ``normal`` (D,); returns False (and leaves both) where the point lies on
+    the segment itself, whose normal is undefined."""
+    nearest = np.empty(point.size)
+    distance = distance_to_segment(point, start, end, nearest)
+    if distance == 0.0:
+        return False
+    for k in range(point.size):
+        normal[k] = (point[k] - nearest[k]) / distance
+        point[k] = nearest[k] + radius * normal[k]
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def tangent_basis(normal, basis):
+    """An orthonormal basis (D, D) whose first column is the unit ``normal`` (D,) and whose others span its tangent
+    plane, into ``basis``; the same normal always gives the same basis."""
+    dim = normal.size
+    if dim == 2:
+        basis[0, 0], basis[1, 0] = normal[0], normal[1]
+        basis[0, 1], basis[1, 1] = -normal[1], normal[0]
+        return
+    least = 0  # the axis least aligned with the normal, crossed with it, gives the first tangent
+    for k in range(1, 3):
+        if abs(normal[k]) < abs(normal[least]):
+            least = k
+    axis = np.zeros(3)
+    axis[least] = 1.0
+    first = np.empty(3)
+    first[0] = axis[1] * normal[2] - axis[2] * normal[1]
+    first[1] = axis[2] * normal[0] - axis[0] * normal[2]
+    first[2] = axis[0] * normal[1] - axis[1] * normal[0]
+    norm = math.sqrt(first[0] ** 2 + first[1] ** 2 + first[2] ** 2)
+    for k in range(3):
+        basis[k, 0] = normal[k]
+        basis[k, 1] = first[k] / norm
+    basis[0, 2] = normal[1] * basis[2, 1] - normal[2] * basis[1, 1]
+    basis[1, 2] = normal[2] * basis[0, 1] - normal[0] * basis[2, 1]
+    basis[2, 2] = normal[0] * basis[1, 1] - normal[1] * basis[0, 1]
+
+
+@njit(cache=True, error_model="numpy")
+def rotate_node(band, first, basis):
+    """Expresses one node's D DOFs ``first`` … ``first`` + D − 1 of a rod's symmetric band (n, kd+1) in the
+    ``basis`` (D, D) (x = Q·ξ): A ← Tᵀ·A·T with T the identity but for Q on that node's block, in place."""
+    n, kd1 = band.shape
+    kd = kd1 - 1
+    dim = basis.shape[0]
+    last = first + dim
+    old = np.empty(dim)
+    # A node couples to nodes at most two away, all within the band (kd = 3·S − 1), so no rotated entry falls
+    # outside it.
+    for j in range(max(0, first - kd), min(n, last + kd)):  # every other DOF the node's block couples to
+        if first <= j < last:
+            continue
+        for a in range(dim):  # A[node, j] ← Qᵀ·A[node, j]
+            i = first + a
+            if abs(i - j) > kd:
+                old[a] = 0.0
+            else:
+                old[a] = band[i, kd - i + j] if j <= i else band[j, kd - j + i]
+        for a in range(dim):
+            i = first + a
+            if abs(i - j) > kd:
+                continue
+            value = 0.0
+            for m in range(dim):
+                value += basis[m, a] * old[m]
+            if j <= i:
+                band[i, kd - i + j] = value
+            else:
+                band[j, kd - j + i] = value
+    block = np.empty((dim, dim))
+    for a in range(dim):
+        for m in range(dim):
+            i, k = first + max(a, m), first + min(a, m)
+            block[a, m] = band[i, kd - i + k]
+    for a in range(dim):
+        for m in range(a + 1):
+            value = 0.0
+            for x in range(dim):
+                for y in range(dim):
+                    value += basis[x, a] * block[x, y] * basis[y, m]
+            band[first + a, kd - a + m] = value
+
+
+__all__ = ["ObjectView", "object_in_rod_frames", "normal_reactions", "within_reach", "find_penetrations",
+           "distance_to_segment", "onto_surface", "tangent_basis", "rotate_node"]

@@ -8,6 +8,7 @@ corrector :mod:`..solvers.corrector`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import KW_ONLY, dataclass
 
 import numpy as np
@@ -31,6 +32,10 @@ class _Body:
     """Mass density [kg/m³] of a free object; None for an object fixed in space."""
     velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """Initial velocity of a free object [m/s]."""
+    friction: float = DEFAULT_FRICTION
+    """Coulomb friction coefficient μ between the fingers and the object (dimensionless): a contact sticks while
+    its tangential reaction is at most μ times its normal one, and slides otherwise; 0 is frictionless, ``math.inf``
+    always sticks (as the paper's holds do)."""
 
     @property
     def free(self) -> bool:
@@ -64,8 +69,15 @@ class Sphere(_Body):
 
 
 def _check_motion(obj) -> None:
-    """Validates the ``density`` and initial ``velocity`` of a sphere or capsule."""
+    """Validates the ``density``, initial ``velocity`` and ``friction`` of a sphere or capsule."""
     kind = type(obj).__name__
+    try:
+        friction = float(obj.friction)
+    except (TypeError, ValueError):
+        raise ValueError(f"{kind}.friction = {obj.friction!r} is not a number (dimensionless)") from None
+    if not friction >= 0.0:
+        raise ValueError(f"{kind}.friction = {obj.friction!r} is outside the allowed range [0, inf] (dimensionless)")
+    object.__setattr__(obj, "friction", friction)
     if obj.density is not None:
         check_range(kind, "density", obj.density, "kg/m³", 0.0, 1e5)
     velocity = tuple(float(v) for v in obj.velocity)
@@ -109,8 +121,8 @@ class Capsule(_Body):
 GraspedObject = Sphere | Capsule
 
 
-PAPER_BALL = Sphere(radius=0.065, center=(0.0, 0.0, -0.09))
-"""The paper's ball: R = 0.065 m, centre (0, 0, −0.09) m, fixed."""
+PAPER_BALL = Sphere(radius=0.065, center=(0.0, 0.0, -0.09), friction=math.inf)
+"""The paper's ball: R = 0.065 m, centre (0, 0, −0.09) m, fixed; its holds stick, as the paper's do."""
 
 
 @dataclass(frozen=True)

@@ -7,14 +7,19 @@ entered the surface, which is the same for a slow node and keeps a fast impact (
 1 m/s) from stretching its edges by the projection. The reaction on a held node is the unbalanced force of its
 equation of motion, R = M·a − f. Contact is compression-only: a held node whose normal reaction R·n turns adhesive
 (pulls it into the object, R·n < 0) is released (a reaction pulling by less than Newton's force tolerance is zero to
-that tolerance and stays) and the step solved again, from the last solution. The corrector repeats until nothing
-changes, at most :attr:`~..scene.objects.ContactSettings.max_corrector_iterations` times; if nodes are still inside
-the object then, it holds them, releasing nothing, until none is (the step then reports ``resolved = False``).
-Held nodes stick: they stay where they were held until released, so the contact transmits tangential force without
-sliding. The base clamp is kept throughout.
+that tolerance and stays) and the step solved again, from the last solution.
 
-A fixed object is a body that does not move: its held nodes stay on the points where they were held, and only the
-rods whose contacts changed are solved again. A free body moves with the rods that hold it: a held node keeps its
+Contact has Coulomb friction μ (the object's): a held node is stuck to a point of the object while its tangential
+reaction is within μ·R_n, and otherwise slides along the surface against a friction μ·R_n opposite to its slip
+(solved in its surface's frame, :func:`~.newton.newton`); a sliding node whose slip turns back against its friction
+sticks again. Friction is held fixed through a solve and updated here until it settles (:data:`FRICTION_TOLERANCE`).
+The corrector repeats until nothing changes, at most
+:attr:`~..scene.objects.ContactSettings.max_corrector_iterations` times; if nodes are still inside the object then,
+it holds them, releasing nothing and changing no friction, until none is (the step then reports
+``resolved = False``). The base clamp is kept throughout. ``docs/contact.md`` describes the method and why.
+
+A fixed object is a body that does not move: its stuck nodes stay on the points where they were held, and only the
+rods whose contacts changed are solved again. A free body moves with the rods that hold it: a stuck node keeps its
 offset in the body's frame, and a gripper whose contacts changed is solved again whole, body included.
 """
 
@@ -27,7 +32,7 @@ from numba import njit
 
 from ..kernels.assembly import RodArrays, StepInputs
 from ..kernels.body import BodyArrays, BodyMotion, BodyState, body_in_rod_frames, planar_body_basis, turned
-from ..kernels.contact import ObjectView, find_penetrations, normal_reactions, within_reach
+from ..kernels.contact import ObjectView, distance_to_segment, find_penetrations, within_reach
 from ..scene.forces import ForceTerms
 from ..scene.objects import PENETRATION_TOLERANCE
 from .newton import BodyCoupling, Holds, SolverArrays, SolveResult, newton
@@ -47,6 +52,8 @@ class ContactGeometry(NamedTuple):
     finger_radius: np.ndarray
     """Each node's finger radius that contact adds to the object's [m], (N,): zeros for contact on the centre
     lines."""
+    friction: np.ndarray
+    """The Coulomb friction coefficient μ of each rod's object (dimensionless), (R,); inf sticks."""
     finger_directions: np.ndarray
     """Unit radial direction of each finger, (F, 3)."""
     plane_normals: np.ndarray
@@ -65,8 +72,14 @@ class ContactChanges(NamedTuple):
     """Free nodes inside the object, (R, N) bool."""
     hold_at: np.ndarray
     """Where each node is held, in its rod's coordinates [m], (R, N, D); written for the new holds."""
+    slide: np.ndarray
+    """Which held nodes slide in the next solve, (R, N) bool."""
+    friction: np.ndarray
+    """The friction force on each node that slides in the next solve [N], (R, N, D)."""
+    stuck_again: np.ndarray
+    """Sliding nodes that stick again where they are, (R, N) bool (their hold points are in ``hold_at``)."""
     changed: np.ndarray
-    """Rods with either, (R,) bool."""
+    """Rods with any of these, (R,) bool."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -100,49 +113,56 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
     n_rods, n_nodes, _ = q.shape
     dim = step.water.shape[1]
     n_fingers = solver.n_fingers
-    held = holds.held
+    held, sliding = holds.held, holds.sliding
     starts, ends, radii = geometry.starts, geometry.ends, geometry.radii
     solve = np.ones(n_rods, dtype=np.bool_)
-    free = np.empty_like(solver.clamp_free)
+    free = holds.measured.copy()
     rotation = np.empty((3, 3))
     shift = np.zeros((n_rods, dim))
     new_hold = np.empty((n_rods, n_nodes), dtype=np.bool_)
     adhesive = np.empty((n_rods, n_nodes), dtype=np.bool_)
-    changes = ContactChanges(adhesive, new_hold, hold_at, result.changed)
+    changes = ContactChanges(adhesive, new_hold, hold_at, np.zeros((n_rods, n_nodes), dtype=np.bool_),
+                             np.zeros((n_rods, n_nodes, dim)), np.zeros((n_rods, n_nodes), dtype=np.bool_),
+                             result.changed)
     positions, old_positions = q[:, :, :dim], step.q_old[:, :, :dim]
+    anchor_points = np.empty((n_rods, n_nodes, dim))
     result.corrector[:] = 0
     result.residual[:, :] = 0.0
     for k in range(solver.max_corrector_iterations + n_nodes + 1):  # holds-only solves end by N
-        free[:, :] = solver.clamp_free
-        release_held(free, held, dim)
+        contact_masks(solver.clamp_free, held, sliding, dim, free, holds.measured)
         if moving is not None:
             basis = geometry.any_motion if dim == 3 else planar_body_basis(held, geometry.plane_normals)
-            newton(q, step, rods, terms, solver, free, BodyCoupling(holds, moving[0], moving[1], basis), solve, result)
+            newton(q, step, rods, terms, solver, free, holds, BodyCoupling(moving[0], moving[1], basis), solve,
+                   result)
             _body_at_solution(step, solver, holds, geometry, moving[0], moving[1], rotation, shift)
-        else:  # a fixed object's holds stay where they were held; solved from the last solution, warm
-            _hold_in_place(positions, held, hold_at, solve)
-            newton(q, step, rods, terms, solver, free, None, solve, result)
+        else:  # a fixed object's stuck nodes stay where they were held; solved from the last solution, warm
+            _hold_in_place(positions, held, sliding, hold_at, solve)
+            newton(q, step, rods, terms, solver, free, holds, None, solve, result)
         view = ObjectView(starts, ends, radii, within_reach(starts, ends, radii, solver.finger_length), shift)
-        contact_changes(positions, old_positions, result.residual, held, view, solver, changes)
         within_budget = k < solver.max_corrector_iterations
+        anchors = hold_at if moving is None else _anchors(holds, moving[1], n_fingers, anchor_points)
+        contact_changes(positions, old_positions, anchors, result.residual, holds, view, geometry.friction, solver,
+                        within_budget, changes)
         if not corrector_continues(within_budget, new_hold, result.changed, solve):
             break
         if moving is not None:
-            _body_frame_offsets(new_hold, hold_at, holds, moving[1], n_fingers)
-        update_holds(within_budget, held, adhesive, new_hold)
+            _body_frame_offsets(new_hold, changes.stuck_again, hold_at, holds, moving[1], n_fingers)
+        update_holds(within_budget, holds, changes)
         for r in range(n_rods):
             if solve[r]:
                 result.corrector[r] += 1
+    if moving is not None:  # a sliding node stops where it is, on the body, when the step ends
+        _body_frame_offsets(np.zeros_like(held), sliding, positions, holds, moving[1], n_fingers)
 
 
 @njit(cache=True, error_model="numpy")
-def _hold_in_place(positions, held, hold_at, solve):
-    """Puts the held nodes of the rods to be solved on their hold points (a fixed object's holds)."""
+def _hold_in_place(positions, held, sliding, hold_at, solve):
+    """Puts the stuck nodes of the rods to be solved on their hold points (a fixed object's holds)."""
     for r in range(positions.shape[0]):
         if not solve[r]:
             continue
         for i in range(positions.shape[1]):
-            if held[r, i]:
+            if held[r, i] and not sliding[r, i]:
                 for d in range(positions.shape[2]):
                     positions[r, i, d] = hold_at[r, i, d]
 
@@ -156,7 +176,7 @@ def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shi
         turned(motion.rotation[b], motion.old.orientation[b], rotation, motion.orientation[b])
     body_in_rod_frames(c, motion.orientation, body.segment_start, body.segment_end, body.radius,
                        geometry.finger_radius, geometry.finger_directions, geometry.plane_normals, geometry.starts,
-                       geometry.ends, geometry.radii)
+                       geometry.ends, geometry.radii)  # (the same arrays as holds.starts, .ends and .radii)
     projection = holds.projection
     for r in range(shift.shape[0]):
         b = r // solver.n_fingers
@@ -166,14 +186,36 @@ def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shi
 
 
 @njit(cache=True, error_model="numpy")
-def _body_frame_offsets(new_hold, hold_at, holds, motion, n_fingers):
-    """The offset of each new hold in its body's frame at the end of the last solve [m], into ``holds.offsets``."""
+def _anchors(holds, motion, n_fingers, anchors):
+    """Where each held node of a free body's rods stuck last, P·(c + R·r_h) at the body's pose after the last solve,
+    into ``anchors`` (R, N, D), which it returns."""
+    projection, orientation, c = holds.projection, motion.orientation, motion.position
+    for r in range(anchors.shape[0]):
+        b = r // n_fingers
+        for i in range(anchors.shape[1]):
+            if not holds.held[r, i]:
+                continue
+            for d in range(anchors.shape[2]):
+                value = 0.0
+                for k in range(3):
+                    world = c[b, k]
+                    for m in range(3):
+                        world += orientation[b, k, m] * holds.offsets[r, i, m]
+                    value += projection[r, d, k] * world
+                anchors[r, i, d] = value
+    return anchors
+
+
+@njit(cache=True, error_model="numpy")
+def _body_frame_offsets(new_hold, stuck_again, hold_at, holds, motion, n_fingers):
+    """The offset of each new hold, and each sliding node that sticks again, in its body's frame at the end of the
+    last solve [m], into ``holds.offsets``."""
     projection, orientation, c = holds.projection, motion.orientation, motion.position
     dim = hold_at.shape[2]
     for r in range(new_hold.shape[0]):
         b = r // n_fingers
         for i in range(new_hold.shape[1]):
-            if not new_hold[r, i]:
+            if not (new_hold[r, i] or stuck_again[r, i]):
                 continue
             for m in range(3):
                 value = 0.0
@@ -185,35 +227,111 @@ def _body_frame_offsets(new_hold, hold_at, holds, motion, n_fingers):
                 holds.offsets[r, i, m] = value
 
 
+FRICTION_TOLERANCE = 5e-3
+"""A sliding node's friction is solved again when its Coulomb value μ·R_n (and direction) moved by more than this
+fraction since the solve (plus Newton's force tolerance)."""
+
+
 @njit(cache=True, error_model="numpy")
-def contact_changes(positions, old_positions, residual, held, view, solver, changes):
+def contact_changes(positions, old_positions, anchors, residual, holds, view, friction, solver, within_budget,
+                    changes):
     """The corrector's test after a solve, for rods whose nodes are at ``positions`` (R, N, D) and whose residual
     (R, n) holds the reactions on held DOFs, against the object as each rod sees it (``view``,
-    :class:`~..kernels.contact.ObjectView`). Marks in ``changes.adhesive`` (R, N) the holds whose normal reaction
-    pulls by more than Newton's force tolerance ``solver.force_tolerance`` [N] (a reaction is known to that
-    tolerance: one pulling by less is zero, and releasing it would only make the corrector cycle), in
-    ``changes.new_hold`` (R, N) the free nodes that penetrate the object, with their hold points in
-    ``changes.hold_at`` (:func:`~..kernels.contact.find_penetrations`), and in ``changes.changed`` (R,) the rods
-    with either (:class:`ContactChanges`)."""
+    :class:`~..kernels.contact.ObjectView`), with Coulomb friction ``friction`` μ (R,) (:class:`ContactChanges`).
+    ``anchors`` (R, N, D) are the points where the sliding nodes were stuck last, on the object as it is now:
+
+    - ``adhesive``: held nodes whose normal reaction R_n pulls by more than Newton's force tolerance
+      ``solver.force_tolerance`` [N] (a reaction is known to that tolerance: one pulling by less is zero, and
+      releasing it would only make the corrector cycle);
+    - ``new_hold``: free nodes that penetrate the object, with their hold points in ``hold_at``
+      (:func:`~..kernels.contact.find_penetrations`);
+    - ``slide`` and ``friction``: a stuck node whose tangential reaction exceeds μ·R_n slides, against a friction of
+      μ·R_n along that reaction; a sliding node keeps sliding while it has moved from its anchor against its
+      friction, which becomes μ·R_n against that motion, and otherwise is ``stuck_again`` where it is.
+      Only within the budget (``within_budget``);
+    - ``changed``: rods with any of these, or whose friction moved by more than :data:`FRICTION_TOLERANCE`.
+    """
     adhesive, new_hold, changed = changes.adhesive, changes.new_hold, changes.changed
+    held, sliding = holds.held, holds.sliding
     n_rods, n_nodes, dim = positions.shape
     stride = residual.shape[1] // n_nodes
-    reaction = np.zeros((n_rods, n_nodes, dim))
-    for r in range(n_rods):
-        for i in range(n_nodes):
-            if held[r, i]:
-                for d in range(dim):
-                    reaction[r, i, d] = residual[r, stride * i + d]
-    normal = normal_reactions(positions, reaction, view.starts, view.ends)
+    force_tolerance = solver.force_tolerance
     new_hold[:, :] = False
+    changes.stuck_again[:, :] = False
     found = find_penetrations(positions, old_positions, view, held, solver.first_free_node, PENETRATION_TOLERANCE,
                               new_hold, changes.hold_at)
-    force_tolerance = solver.force_tolerance
+    nearest = np.empty(dim)
+    normal = np.empty(dim)
+    reaction = np.empty(dim)
+    slip = np.empty(dim)
     for r in range(n_rods):
         changed[r] = found[r] > 0
+        mu = friction[r]
         for i in range(n_nodes):
-            adhesive[r, i] = held[r, i] and normal[r, i] < -force_tolerance
-            changed[r] |= adhesive[r, i]
+            adhesive[r, i] = False
+            changes.slide[r, i] = False
+            if not held[r, i]:
+                continue
+            distance = distance_to_segment(positions[r, i], view.starts[r], view.ends[r], nearest)
+            normal_reaction = 0.0
+            for d in range(dim):
+                normal[d] = (positions[r, i, d] - nearest[d]) / distance
+                reaction[d] = residual[r, stride * i + d]
+                normal_reaction += reaction[d] * normal[d]
+            if normal_reaction < -force_tolerance:
+                adhesive[r, i] = True
+                changed[r] = True
+                continue
+            if not within_budget or mu == np.inf:
+                changes.slide[r, i] = sliding[r, i]
+                for d in range(dim):
+                    changes.friction[r, i, d] = holds.friction[r, i, d]
+                continue
+            limit = mu * max(normal_reaction, 0.0)
+            if not sliding[r, i]:  # stuck: within the cone, or slides along its tangential reaction
+                tangential = 0.0
+                for d in range(dim):
+                    tangential += (reaction[d] - normal_reaction * normal[d]) ** 2
+                tangential = np.sqrt(tangential)
+                if tangential > limit + force_tolerance:
+                    changes.slide[r, i] = True
+                    changed[r] = True
+                    for d in range(dim):
+                        changes.friction[r, i, d] = limit * (reaction[d] - normal_reaction * normal[d]) / tangential
+                continue
+            along = 0.0  # sliding: how far it has slid from where it stuck, along the surface
+            for d in range(dim):
+                slip[d] = positions[r, i, d] - anchors[r, i, d]
+                along += slip[d] * normal[d]
+            size = 0.0
+            against = 0.0
+            for d in range(dim):
+                slip[d] -= along * normal[d]
+                size += slip[d] ** 2
+                against += slip[d] * holds.friction[r, i, d]
+            size = np.sqrt(size)
+            if against > 0.0:  # its friction no longer opposes its motion: it has stopped and turned back
+                changes.stuck_again[r, i] = True
+                changed[r] = True
+                for d in range(dim):
+                    changes.hold_at[r, i, d] = positions[r, i, d]
+                continue
+            changes.slide[r, i] = True
+            old_size = 0.0
+            for d in range(dim):
+                old_size += holds.friction[r, i, d] ** 2
+            old_size = np.sqrt(old_size)
+            moved = 0.0
+            for d in range(dim):  # against the motion; a node that did not move keeps its friction's direction
+                if size > 0.0:
+                    changes.friction[r, i, d] = -limit * slip[d] / size
+                elif old_size > 0.0:
+                    changes.friction[r, i, d] = limit * holds.friction[r, i, d] / old_size
+                else:
+                    changes.friction[r, i, d] = 0.0
+                moved += (changes.friction[r, i, d] - holds.friction[r, i, d]) ** 2
+            if np.sqrt(moved) > FRICTION_TOLERANCE * limit + force_tolerance:
+                changed[r] = True
 
 
 @njit(cache=True, error_model="numpy")
@@ -231,24 +349,35 @@ def corrector_continues(within_budget, new_hold, changed, again):
 
 
 @njit(cache=True, error_model="numpy")
-def update_holds(within_budget, held, adhesive, new_hold):
-    """The holds of the next solve, in place: new penetrations held, and within the budget adhesive holds released."""
+def update_holds(within_budget, holds, changes):
+    """The holds of the next solve, in place (:class:`ContactChanges`): new penetrations held (stuck), within the
+    budget adhesive holds released, and every hold stuck or sliding as the test found, with its friction."""
+    held, sliding, adhesive, new_hold = holds.held, holds.sliding, changes.adhesive, changes.new_hold
     for r in range(held.shape[0]):
         for i in range(held.shape[1]):
             held[r, i] = (held[r, i] and not (within_budget and adhesive[r, i])) or new_hold[r, i]
+            sliding[r, i] = held[r, i] and not new_hold[r, i] and changes.slide[r, i]
+            for d in range(holds.friction.shape[2]):
+                holds.friction[r, i, d] = changes.friction[r, i, d] if sliding[r, i] else 0.0
 
 
 @njit(cache=True, error_model="numpy")
-def release_held(free, held, dim):
-    """Marks the position DOFs of every held node (R, N) as not free in ``free`` (R, n), in place: a held node
-    moves with its object, not on its own."""
+def contact_masks(clamp_free, held, sliding, dim, free, measured):
+    """The DOFs Newton solves for, ``free`` (R, n), and those its test measures as they are, ``measured`` (R, n),
+    from the clamp's ``clamp_free`` (R, n) and the contacts (R, N): a stuck node's position DOFs are fixed (it moves
+    with its object); a sliding node's are solved in its surface's frame, the normal fixed and the tangents free,
+    and measured there (:func:`~.newton.newton`)."""
     stride = free.shape[1] // held.shape[1]
     for r in range(held.shape[0]):
+        for j in range(free.shape[1]):
+            free[r, j] = clamp_free[r, j]
+            measured[r, j] = clamp_free[r, j]
         for i in range(held.shape[1]):
             if held[r, i]:
                 for d in range(dim):
-                    free[r, stride * i + d] = False
+                    free[r, stride * i + d] = sliding[r, i] and d > 0
+                    measured[r, stride * i + d] = False
 
 
-__all__ = ["ContactGeometry", "solve_with_contact", "contact_changes", "corrector_continues", "update_holds",
-           "release_held"]
+__all__ = ["ContactGeometry", "FRICTION_TOLERANCE", "solve_with_contact", "contact_changes", "corrector_continues",
+           "update_holds", "contact_masks"]

@@ -31,6 +31,7 @@ from numba import njit
 
 from ..kernels.assembly import RodArrays, StepInputs, assemble_rod
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
+from ..kernels.contact import onto_surface, rotate_node, tangent_basis
 from ..kernels.linalg import factor_banded_symmetric, solve_factored
 from ..scene.forces import ForceTerms
 
@@ -78,14 +79,33 @@ class SolveResult(NamedTuple):
 
 
 class Holds(NamedTuple):
-    """Where the held nodes are, and how each rod sees the world."""
+    """The nodes in contact with the object, stuck or sliding, and how each rod sees the world and the object."""
 
     held: np.ndarray
-    """Nodes held on the object, (R, N) bool."""
+    """Nodes in contact with the object, (R, N) bool: stuck to a point of it, or sliding on it."""
     offsets: np.ndarray
-    """Each held node's offset from a free body's centre in the body's frame [m], (R, N, 3)."""
+    """Each stuck node's offset from a free body's centre in the body's frame [m], (R, N, 3)."""
     projection: np.ndarray
     """Rod coordinates from world vectors, (R, D, 3)."""
+    sliding: np.ndarray
+    """Held nodes that slide, (R, N) bool: they stay on the object's surface and move along it against
+    ``friction``."""
+    friction: np.ndarray
+    """The friction force on each sliding node, in its rod's coordinates [N], (R, N, D), held fixed through a solve
+    (the corrector updates it); its part along the surface at the node's current point acts."""
+    measured: np.ndarray
+    """The DOFs whose residual Newton's test measures as they are, (R, n) bool: the free DOFs of nodes that do not
+    slide (a sliding node's are measured in its surface's frame)."""
+    starts: np.ndarray
+    """The object's segment as each rod sees it, one end [m], (R, D); for a fixed object (a free body's follows the
+    body through the solve)."""
+    ends: np.ndarray
+    """The other end [m], (R, D)."""
+    radii: np.ndarray
+    """The distance from the segment at which each node touches a fixed object [m], (R, N)."""
+    finger_radius: np.ndarray
+    """The finger's radius that contact adds to the object's at each node [m], (N,) (a free body's touching
+    distances follow it through the solve)."""
 
 
 def plain(bundle: tuple) -> tuple:
@@ -99,7 +119,6 @@ class BodyCoupling(NamedTuple):
     """What couples a gripper's rods to a free body in Newton's method. Where no body moves (rods on their own, or
     held on a fixed object) the solvers get None instead, and compile the loop without the body's code."""
 
-    holds: Holds
     body: BodyArrays
     """The bodies (:class:`~..kernels.body.BodyArrays`)."""
     motion: BodyMotion
@@ -181,21 +200,22 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def newton(q, step, rods, terms, solver, free, coupling, solve, result):
+def newton(q, step, rods, terms, solver, free, holds, coupling, solve, result):
     """Newton's method for the rods where ``solve`` (R,) is True, each gripper at once (see the module notes).
 
     ``q`` (R, N, S) holds the start and receives the solution; only DOFs where ``free`` (R, n) is True move. With the
     residual r = M·(q − q_pred)/Δt² − f, a rod (or, with a free body, a gripper, whose rods are then all solved) has
     converged when its largest |r|·tolerance_inverse over free DOFs, and the body's residual over its tolerance, is
     ≤ 1. ``step`` is :class:`~..kernels.assembly.StepInputs`, ``rods`` :class:`~..kernels.assembly.RodArrays`,
-    ``terms`` the scene's :class:`~..scene.forces.ForceTerms`, ``solver`` :class:`SolverArrays`, ``coupling`` a
-    :class:`BodyCoupling` with free bodies, else None. Writes every solved rod's ``converged``,
-    ``iterations``, ``ratio`` and ``residual`` into ``result`` (:class:`SolveResult`). A rod whose factorisation
-    fails stops with ratio inf.
+    ``terms`` the scene's :class:`~..scene.forces.ForceTerms`, ``solver`` :class:`SolverArrays`, ``holds`` the
+    contacts (:class:`Holds`; None for rods on their own), ``coupling`` a :class:`BodyCoupling` with free bodies,
+    else None. A sliding node's DOFs are solved for in its surface's frame (normal fixed, tangents free; ``free``
+    then reads in that frame). Writes every solved rod's ``converged``, ``iterations``, ``ratio`` and ``residual``
+    into ``result`` (:class:`SolveResult`). A rod whose factorisation fails stops with ratio inf.
     """
     work = _new_work(q, step.water.shape[1], solver.n_fingers, coupling is not None)
     for b in range(q.shape[0] // solver.n_fingers):
-        _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, result, work)
+        _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve, result, work)
 
 
 class _NewtonWork(NamedTuple):
@@ -223,6 +243,8 @@ class _NewtonWork(NamedTuple):
     product: np.ndarray
     column: np.ndarray
     band_row: np.ndarray
+    normals: np.ndarray
+    basis: np.ndarray
 
 
 @njit(cache=True, error_model="numpy")
@@ -231,6 +253,7 @@ def _new_work(q, dim, n_fingers, coupled):
     n_nodes, stride = q.shape[1], q.shape[2]
     n = n_nodes * stride
     band_width = 3 * stride - 1
+    surface = (np.zeros((n_fingers, n_nodes, dim)), np.empty((dim, dim)))  # sliding nodes' normals, and a basis
     flags = (np.empty(n_fingers), np.empty(n_fingers, dtype=np.bool_), np.zeros(n_fingers, dtype=np.bool_),
              np.empty(n_fingers, dtype=np.bool_))
     rods = (np.empty((n_nodes, stride)), np.empty((n_nodes, dim)), np.empty((n_nodes, dim)),
@@ -239,21 +262,22 @@ def _new_work(q, dim, n_fingers, coupled):
         return _NewtonWork(*rods, np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)), np.empty((n_fingers, n, 6)),
                            np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)), np.zeros((n_fingers, n)), *flags,
                            np.empty(6), np.empty((6, 6)), np.empty(6), np.empty(6), np.empty((3, 3)),
-                           np.empty((n, 6)), np.empty(n), np.empty(band_width + 1))
+                           np.empty((n, 6)), np.empty(n), np.empty(band_width + 1), *surface)
     vector, matrix, coupling = np.empty(0), np.empty((0, 0)), np.empty((0, 0, 6))
     return _NewtonWork(*rods, coupling, np.empty((n_fingers, n)), coupling, np.empty((0, 6, 6)), np.empty((0, 6)),
                        matrix, *flags, vector, matrix, vector, vector, matrix, np.empty((0, 6)), vector,
-                       np.empty(band_width + 1))
+                       np.empty(band_width + 1), *surface)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, result, work):
+def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve, result, work):
     """Newton's method for gripper b's rods where ``solve`` is True (all of them, and the body, with a free body)."""
     # arrays taken out of their bundles once: a bundle's member read in a loop costs a reference count each time
     active, touching, rod_ratio, factored = work.active, work.touching, work.rod_ratio, work.factored
     converged, iterations_of, ratio = result.converged, result.iterations, result.ratio
     residual, mass_term, bands, x0 = result.residual, solver.mass_term, work.bands, work.x0
     scratch = (work.force, work.velocity, work.acceleration)
+    measured = free if holds is None else holds.measured
     n_fingers = solver.n_fingers
     first = b * n_fingers
     coupled = coupling is not None  # every branch on the body tests ``coupling`` itself, so None prunes them
@@ -270,7 +294,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, resul
             ratio[first + f] = np.inf
         touching[f] = False
         if coupling is not None:
-            touching[f] = coupling.holds.held[first + f].any()
+            touching[f] = holds.held[first + f].any()
     gripper_ratio = np.inf
     halvings = 0
     iterations = 0
@@ -286,14 +310,22 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, resul
         for f in range(n_fingers):
             if not active[f]:
                 continue
+            if holds is not None:
+                if coupling is not None:
+                    if touching[f]:
+                        _place_held_nodes(b, first + f, q, holds, coupling, work.coupling[f], work.normals[f],
+                                          work.body_residual)
+                else:
+                    _slide_on_fixed_object(first + f, q, holds, work.normals[f])
+            rod_ratio[f], largest = _rod_residual(first + f, q, step, rods, terms, solver, measured,
+                                                  residual[first + f], x0[f], largest, bands[f], scratch)
+            if holds is not None:
+                rod_ratio[f], largest = _slide_rows(first + f, holds, work.normals[f], residual[first + f], x0[f],
+                                                    bands[f], solver.tolerance_inverse, rod_ratio[f], largest,
+                                                    work.basis)
             if coupling is not None:
                 if touching[f]:
-                    _place_held_nodes(b, first + f, q, coupling.holds, coupling.motion, work.coupling[f])
-            rod_ratio[f], largest = _rod_residual(first + f, q, step, rods, terms, solver, free, residual[first + f],
-                                                  x0[f], largest, bands[f], scratch)
-            if coupling is not None:
-                if touching[f]:
-                    _load_body(residual[first + f], work.coupling[f], work.body_residual)
+                    _load_body(x0[f], work.coupling[f], work.body_residual)
         if coupling is not None:
             largest = _body_residual_in_basis(coupling.basis[b], solver.body_tolerance, work.body_residual,
                                               work.body_total, largest)
@@ -326,17 +358,18 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, resul
         failures = eliminate_rods(work.bands, work.coupling, free[rods_in], touching, active, work.x0,
                                   work.x_coupling, work.block, work.rhs, factored,
                                   (work.product, work.column, work.band_row))
+        if holds is not None:
+            _unrotate_steps(first, holds, work)
         if coupling is not None:
-            if failures:
+            if failures or not _body_step(b, coupling.basis[b], work):
                 gripper_ratio = np.inf
                 break
-            _body_step(b, coupling.basis[b], work)
         else:
             for f in range(n_fingers):
                 if active[f] and not factored[f]:
                     ratio[first + f] = np.inf
                     active[f] = False
-        _apply_step(b, first, q, free, coupling, work)
+        _apply_step(b, first, q, coupling, work)
         iterations += 1
         if not coupled:
             for f in range(n_fingers):
@@ -347,35 +380,173 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, coupling, solve, resul
 
 
 @njit(cache=True, error_model="numpy")
-def _place_held_nodes(b, r, q, holds, motion, coupling):
-    """Puts rod r's held nodes on the body, x = P·(c + R·r_h), and writes S = P·[I, −[a]×], the motion of each held
-    DOF per unit body motion, into ``coupling`` (n, 6) (zero rows elsewhere)."""
+def _place_held_nodes(b, r, q, holds, coupling, rod_coupling, normals, body_residual):
+    """Puts rod r's stuck nodes on the free body, x = P·(c + R·r_h), and its sliding nodes onto the body's surface
+    at their current point; writes S = P·[I, −[a]×], the motion of each held DOF per unit body motion, into
+    ``rod_coupling`` (n, 6) (zero rows elsewhere; a sliding node's rows in its surface's frame, where only the
+    normal follows the body), the sliding nodes' normals into ``normals`` (N, D), and adds the reaction of their
+    friction on the body to ``body_residual`` (6,)."""
+    motion, body = coupling.motion, coupling.body
     stride = q.shape[2]
-    dim = holds.projection.shape[1]
+    projection = holds.projection[r]
+    dim = projection.shape[0]
     orientation = motion.orientation[b]
     c = motion.position
     a = np.empty(3)
     world = np.empty(3)
     cross = np.empty((3, 3))
-    coupling[:, :] = 0.0
+    motion_rows = np.empty((dim, 6))  # P·[I, −[a]×] of one node
+    rod_coupling[:, :] = 0.0
+    start, end = np.empty(dim), np.empty(dim)  # the body's segment as the rod sees it now
+    for d in range(dim):
+        start[d] = end[d] = 0.0
+        for k in range(3):
+            centre_start, centre_end = c[b, k], c[b, k]
+            for m in range(3):
+                centre_start += orientation[k, m] * body.segment_start[b, m]
+                centre_end += orientation[k, m] * body.segment_end[b, m]
+            start[d] += projection[d, k] * centre_start
+            end[d] += projection[d, k] * centre_end
+    across = 0.0  # a planar finger: the centre's distance from its plane, whose normal is (−d_y, d_x, 0)
+    if dim == 2:
+        across = -projection[0, 1] * c[b, 0] + projection[0, 0] * c[b, 1]
+    scratch_normal = np.empty(dim)
     for i in range(q.shape[1]):
         if not holds.held[r, i]:
             continue
-        for k in range(3):
-            a[k] = orientation[k, 0] * holds.offsets[r, i, 0] + orientation[k, 1] * holds.offsets[r, i, 1] \
-                + orientation[k, 2] * holds.offsets[r, i, 2]
-            world[k] = c[b, k] + a[k]
+        sliding = holds.sliding[r, i]
+        reach = body.radius[b] + holds.finger_radius[i]  # where the node touches the body now (the planar section's)
+        radius = reach if dim == 3 else np.sqrt(max(reach * reach - across * across, 0.0))
+        if sliding:  # onto the surface, then its world point relative to the centre
+            onto_surface(q[r, i, :dim], start, end, radius, normals[i])
+            for k in range(3):
+                world[k] = 0.0
+                for d in range(dim):
+                    world[k] += projection[d, k] * q[r, i, d]
+                a[k] = world[k] - c[b, k]
+        else:
+            for k in range(3):
+                a[k] = orientation[k, 0] * holds.offsets[r, i, 0] + orientation[k, 1] * holds.offsets[r, i, 1] \
+                    + orientation[k, 2] * holds.offsets[r, i, 2]
+                world[k] = c[b, k] + a[k]
         cross[0, 0], cross[0, 1], cross[0, 2] = 0.0, -a[2], a[1]
         cross[1, 0], cross[1, 1], cross[1, 2] = a[2], 0.0, -a[0]
         cross[2, 0], cross[2, 1], cross[2, 2] = -a[1], a[0], 0.0
-        projection = holds.projection[r]
         for d in range(dim):
-            row = stride * i + d
-            q[r, i, d] = projection[d, 0] * world[0] + projection[d, 1] * world[1] + projection[d, 2] * world[2]
             for k in range(3):
-                coupling[row, k] = projection[d, k]
-                coupling[row, 3 + k] = -(projection[d, 0] * cross[0, k] + projection[d, 1] * cross[1, k]
-                                         + projection[d, 2] * cross[2, k])
+                motion_rows[d, k] = projection[d, k]
+                motion_rows[d, 3 + k] = -(projection[d, 0] * cross[0, k] + projection[d, 1] * cross[1, k]
+                                          + projection[d, 2] * cross[2, k])
+        if not sliding:
+            for d in range(dim):
+                q[r, i, d] = projection[d, 0] * world[0] + projection[d, 1] * world[1] + projection[d, 2] * world[2]
+                for k in range(6):
+                    rod_coupling[stride * i + d, k] = motion_rows[d, k]
+            if dim == 2:  # a held point the body carries out of the finger's plane: back onto the section
+                onto_surface(q[r, i, :dim], start, end, radius, scratch_normal)
+            continue
+        friction = np.empty(dim)
+        _along_surface(holds.friction[r, i], normals[i], friction)
+        for k in range(6):
+            along_normal = 0.0
+            load = 0.0
+            for d in range(dim):
+                along_normal += normals[i, d] * motion_rows[d, k]
+                load += motion_rows[d, k] * friction[d]
+            rod_coupling[stride * i, k] = along_normal  # ξ_n follows the body; the tangents do not
+            body_residual[k] += load  # the friction's reaction on the body: −(−f) on its point
+
+
+@njit(cache=True, error_model="numpy")
+def _along_surface(friction, normal, out):
+    """The friction force ``friction`` (D,) turned into the tangent plane of ``normal`` (D,), keeping its size."""
+    size = 0.0
+    along = 0.0
+    for d in range(friction.size):
+        size += friction[d] ** 2
+        along += friction[d] * normal[d]
+    tangential = 0.0
+    for d in range(friction.size):
+        out[d] = friction[d] - along * normal[d]
+        tangential += out[d] ** 2
+    scale = np.sqrt(size / tangential) if tangential > 0.0 else 0.0
+    for d in range(friction.size):
+        out[d] *= scale
+
+
+@njit(cache=True, error_model="numpy")
+def _slide_on_fixed_object(r, q, holds, normals):
+    """Puts rod r's sliding nodes onto a fixed object's surface at their current point, their normals into
+    ``normals`` (N, D)."""
+    dim = holds.starts.shape[1]
+    for i in range(q.shape[1]):
+        if holds.held[r, i] and holds.sliding[r, i]:
+            onto_surface(q[r, i, :dim], holds.starts[r], holds.ends[r], holds.radii[r, i], normals[i])
+
+
+@njit(cache=True, error_model="numpy")
+def _slide_rows(r, holds, normals, residual, right_hand_side, band, tolerance_inverse, own, largest, basis):
+    """Rod r's sliding nodes in Newton's system: their friction joins the residual (n,) and the right-hand side (n,),
+    whose node blocks and the band (n, kd+1) are then turned into each node's surface frame (normal, tangents),
+    where the tangents are free and measured against the tolerance. Returns ``own`` and ``largest`` updated."""
+    dim = holds.starts.shape[1]
+    stride = residual.size // normals.shape[0]
+    friction = np.empty(dim)
+    rotated = np.empty(dim)
+    for i in range(normals.shape[0]):
+        if not (holds.held[r, i] and holds.sliding[r, i]):
+            continue
+        _along_surface(holds.friction[r, i], normals[i], friction)
+        first = stride * i
+        for d in range(dim):
+            residual[first + d] -= friction[d]
+            right_hand_side[first + d] += friction[d]
+        tangent_basis(normals[i], basis)
+        for a in range(dim):
+            rotated[a] = 0.0
+            for d in range(dim):
+                rotated[a] += basis[d, a] * right_hand_side[first + d]
+        for a in range(dim):
+            right_hand_side[first + a] = rotated[a]
+            if a > 0:  # the tangents: free
+                scaled = abs(rotated[a]) * tolerance_inverse[r, first + a]
+                if not scaled <= own:
+                    own = scaled
+                if not scaled <= largest:
+                    largest = scaled
+        rotate_node(band, first, basis)
+    return own, largest
+
+
+@njit(cache=True, error_model="numpy")
+def _unrotate_steps(first_rod, holds, work):
+    """Turns the Newton steps of every active rod's sliding nodes, x0 and X (work), from their surface frames back
+    into the rod's coordinates."""
+    normals, basis = work.normals, work.basis
+    dim = basis.shape[0]
+    stride = work.x0.shape[1] // normals.shape[1]
+    value = np.empty(dim)
+    for f in range(work.active.size):
+        if not work.active[f]:
+            continue
+        r = first_rod + f
+        for i in range(normals.shape[1]):
+            if not (holds.held[r, i] and holds.sliding[r, i]):
+                continue
+            tangent_basis(normals[f, i], basis)
+            first = stride * i
+            columns = work.x_coupling.shape[2] if work.x_coupling.shape[0] > 0 else 0  # X only with a body
+            for column in range(-1, columns):
+                for d in range(dim):
+                    value[d] = 0.0
+                    for a in range(dim):
+                        step = work.x0[f, first + a] if column < 0 else work.x_coupling[f, first + a, column]
+                        value[d] += basis[d, a] * step
+                for d in range(dim):
+                    if column < 0:
+                        work.x0[f, first + d] = value[d]
+                    else:
+                        work.x_coupling[f, first + d, column] = value[d]
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -406,12 +577,12 @@ def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_si
 
 
 @njit(cache=True, error_model="numpy")
-def _load_body(residual, coupling, body_residual):
-    """Adds a touching rod's reactions, its residual (n,) on held DOFs moved by ``coupling`` (n, 6), to the body's
-    residual (6,)."""
-    for j in range(residual.size):
+def _load_body(right_hand_side, coupling, body_residual):
+    """Adds a touching rod's reactions, its residual on held DOFs (the negated Newton right-hand side (n,), in the
+    frames the DOFs are solved in) moved by ``coupling`` (n, 6), to the body's residual (6,)."""
+    for j in range(right_hand_side.size):
         for k in range(6):
-            body_residual[k] += coupling[j, k] * residual[j]
+            body_residual[k] -= coupling[j, k] * right_hand_side[j]
 
 
 @njit(cache=True, error_model="numpy")
@@ -451,7 +622,8 @@ def _rods_continue(first, it, max_iterations, result, work):
 @njit(cache=True, error_model="numpy")
 def _body_step(b, basis, work):
     """The body's Newton step (6,) into ``work.body_step``, from the reduced system Bᵀ·A·B δ = −Bᵀ·G + Bᵀ·Σ rhs
-    (A the body's matrix plus the rods' Schur complements; unused columns of B get the identity)."""
+    (A the body's matrix plus the rods' Schur complements; unused columns of B get the identity). Returns False,
+    with no step, where the system is not finite."""
     matrix = work.body_matrix
     for f in range(work.block.shape[0]):
         for i in range(6):
@@ -477,17 +649,20 @@ def _body_step(b, basis, work):
                 for j in range(6):
                     value += basis[i, k] * matrix[i, j] * basis[j, m]
             reduced[k, m] = value + (1.0 if k == m and not used else 0.0)
+    if not (np.isfinite(reduced).all() and np.isfinite(reduced_rhs).all()):
+        return False  # a diverged iterate: the solve fails instead of raising
     solution = np.linalg.solve(reduced, reduced_rhs)
     for i in range(6):
         step[i] = 0.0
         for k in range(6):
             step[i] += basis[i, k] * solution[k]
+    return True
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _apply_step(b, first, q, free, coupling, work):
-    """Moves every active rod by its Newton step, x0 − X·δ (δ the body's step, for rods that touch it), and the
-    body by δ; remembers the rods' steps for the line search."""
+def _apply_step(b, first, q, coupling, work):
+    """Moves every active rod by its Newton step, x0 − X·δ (δ the body's step, for rods that touch it; both are zero
+    on fixed DOFs), and the body by δ; remembers the rods' steps for the line search."""
     x0, x_coupling, body_step, rod_delta = work.x0, work.x_coupling, work.body_step, work.rod_delta
     active, touching_rods = work.active, work.touching
     n_nodes, stride = q.shape[1], q.shape[2]
@@ -499,12 +674,10 @@ def _apply_step(b, first, q, free, coupling, work):
         for i in range(n_nodes):  # node by node, not through a flat view (see _rod_residual)
             for s in range(stride):
                 j = i * stride + s
-                delta = 0.0
-                if free[r, j]:
-                    delta = x0[f, j]
-                    if touching:
-                        for k in range(6):
-                            delta -= x_coupling[f, j, k] * body_step[k]
+                delta = x0[f, j]
+                if touching:
+                    for k in range(6):
+                        delta -= x_coupling[f, j, k] * body_step[k]
                 if coupling is not None:  # for the line search, which only a body's solve has
                     rod_delta[f, j] = delta
                 q[r, i, s] += delta
@@ -559,7 +732,7 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
         rods_of_b = range(b * solver.n_fingers, (b + 1) * solver.n_fingers)
         for r in rods_of_b:
             _predict_rod(r, q_old, velocity_old, acceleration_old, dt, step.q_pred, q)
-        _solve_gripper(b, q, step, rods, terms, solver, solver.clamp_free, None, every_rod, result, work)
+        _solve_gripper(b, q, step, rods, terms, solver, solver.clamp_free, None, None, every_rod, result, work)
         for r in rods_of_b:
             _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
             if midpoint:

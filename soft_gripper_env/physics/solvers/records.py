@@ -66,9 +66,11 @@ class ContactReport:
     """Contact of one step, in the world frame. Arrays are per gripper (B), finger (F) and node (N)."""
 
     held: np.ndarray
-    """Nodes held on the object's surface at the end of the step, (B, F, N) bool."""
+    """Nodes in contact with the object's surface at the end of the step, stuck or sliding, (B, F, N) bool."""
+    sliding: np.ndarray
+    """Held nodes that slide along the surface (Coulomb friction at its limit μ·R_n), (B, F, N) bool."""
     reaction: np.ndarray
-    """Force of the object on each node [N], (B, F, N, 3); zero where not held."""
+    """Force of the object on each node, normal reaction plus friction [N], (B, F, N, 3); zero where not held."""
     normal_reaction: np.ndarray
     """Its component along the outward surface normal [N], (B, F, N); ≥ 0 (compression only)."""
     corrector_iterations: np.ndarray
