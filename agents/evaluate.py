@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -54,10 +55,13 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
              progress: bool = True, **settings) -> dict:
     """Runs ``episodes`` episodes with seeds seed, seed + 1, ...; returns the success rate, mean and standard
     deviation of the return, the mean episode length, the mean of each episode's largest finger force [N], how
-    many episodes ended each way (:func:`episode_ending`), and the per-episode outcomes."""
+    many episodes ended each way (:func:`episode_ending`), the wall time [s], and the per-episode outcomes, with the
+    object's final position [m] (world frame, as observed)."""
     env = gym.make(soft_gripper_env.ENV_ID, **settings)
     task = env.unwrapped.task
-    successes, returns, lengths, forces, endings = [], [], [], [], []
+    layout = observation_slices(task)
+    successes, returns, lengths, forces, endings, positions = [], [], [], [], [], []
+    start = time.perf_counter()
     for k in tqdm(range(episodes), desc="episodes", disable=not progress):
         obs, info = env.reset(seed=seed + k)
         total, largest, steps, done = 0.0, 0.0, 0, False
@@ -72,12 +76,15 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
         returns.append(total)
         lengths.append(steps)
         forces.append(largest)
+        positions.append([float(x) for x in obs[layout["object_position"]]])
+    seconds = time.perf_counter() - start
     env.close()
     return {"episodes": episodes, "first_seed": seed, "success_rate": float(np.mean(successes)),
             "mean_return": float(np.mean(returns)), "std_return": float(np.std(returns)),
             "mean_length": float(np.mean(lengths)), "mean_largest_finger_force_N": float(np.mean(forces)),
             "endings": {name: endings.count(name) for name in ENDINGS},
-            "successes": successes, "returns": returns, "episode_endings": endings}
+            "seconds": seconds, "successes": successes, "returns": returns, "largest_finger_forces_N": forces,
+            "episode_endings": endings, "final_object_positions": positions}
 
 
 def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:

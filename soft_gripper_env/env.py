@@ -207,9 +207,9 @@ class SoftGripperUnderwaterEnv(gym.Env):
 
             self._renderer = FrameRenderer()
         batch = self._batch
-        frame = self._renderer.draw(batch.sim.world_positions(batch.state)[0], batch.object_position[0],
-                                    batch.sim.scenes[0].grasped_object.radius, batch.normal_force[0],
-                                    float(batch.time[0]), batch.natural_curvature[0])
+        frame = self._renderer.draw(batch.sim.world_positions(batch.state)[0], batch.sim.disc.node_radius,
+                                    batch.object_position[0], batch.sim.scenes[0].grasped_object.radius,
+                                    batch.contact_force[0], float(batch.time[0]), batch.natural_curvature[0])
         if self.render_mode == "rgb_array":
             return frame
         self._show(frame)

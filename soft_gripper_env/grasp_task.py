@@ -252,6 +252,9 @@ class GraspBatch:
         self.natural_curvature = np.zeros((B, F))
         """κ̄ of every finger (dimensionless)."""
         self.normal_force = np.zeros((B, F, task.gripper.finger.n_nodes))
+        self.contact_force = np.zeros((B, F, task.gripper.finger.n_nodes, 3))
+        """The object's mean force on each node over the last control interval, normal reaction and friction, world
+        frame [N], (B, F, N, 3)."""
         """Compressive reaction of the object on every node, averaged over the last control interval [N]: stick
         contact makes the reaction of a single physics step impulsive, its mean over the interval is not."""
         self.hold_time = np.zeros(B)
@@ -286,6 +289,7 @@ class GraspBatch:
             self.state = put_grippers(self.state, indices, fresh)
         self.natural_curvature[indices] = 0.0
         self.normal_force[indices] = 0.0
+        self.contact_force[indices] = 0.0
         self.hold_time[indices] = 0.0
         self.time[indices] = 0.0
         self.newton_iterations[indices] = 0
@@ -300,6 +304,7 @@ class GraspBatch:
         iterations = np.zeros(self.batch_size, dtype=np.int64)
         running = active.copy()
         impulse = np.zeros_like(self.normal_force)  # Σ normal reaction · Δt over the interval [N·s]
+        force_impulse = np.zeros_like(self.contact_force)  # Σ reaction · Δt [N·s]
         for _ in range(task.substeps):
             if not running.any():
                 break
@@ -317,12 +322,14 @@ class GraspBatch:
             if result.contact is not None:  # a failed episode's reactions may be NaN: masked, not multiplied
                 impulse += np.where(keep[:, None, None], np.maximum(result.contact.normal_reaction, 0.0), 0.0) * \
                     task.physics_dt
+                force_impulse += np.where(keep[:, None, None, None], result.contact.reaction, 0.0) * task.physics_dt
             iterations += np.where(keep, result.newton_iterations, 0)
             self.natural_curvature = np.clip(self.natural_curvature + rate * step[:, None], low, high)
             self.time += step
             running = keep
         self.newton_iterations = np.where(active, iterations, self.newton_iterations)
         self.normal_force[active] = impulse[active] / task.control_dt
+        self.contact_force[active] = force_impulse[active] / task.control_dt
 
         terms, held = self._reward_terms(action)
         self.hold_time = np.where(active, np.where(held, self.hold_time + task.control_dt, 0.0), self.hold_time)
