@@ -12,8 +12,10 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from .physics import (
+    DEFAULT_FRICTION,
     NATURAL_CURVATURE_LIMIT,
     PAPER_BALL,
+    ContactSettings,
     Current,
     Fluid,
     Gravity,
@@ -82,6 +84,9 @@ class GraspTask:
     object_density: tuple[float, float] = (990.0, 1030.0)
     """Density of the sphere [kg/m³]: near-neutrally buoyant, as soft underwater specimens are, within −1 … +3 % of
     the water's. It still drifts: a 1030 kg/m³ sphere sinks 8–10 cm in the first second, so a grasp must form soon."""
+    object_friction: float = DEFAULT_FRICTION
+    """Coulomb friction coefficient μ between the fingers (and the palm) and the sphere (dimensionless; 0.3, silicone
+    on a wet object, ``docs/contact.md``); ``math.inf`` makes every contact stick."""
     grasp_point: tuple[float, float, float] = (0.0, 0.0, -0.1)
     """Where a grasped object should sit, relative to the palm centre [m]."""
     object_offset: tuple[float, float, float] = (0.015, 0.015, 0.01)
@@ -125,6 +130,9 @@ class GraspTask:
         if not self.curvature_range[0] <= 0.0 <= self.curvature_range[1]:
             raise ValueError(f"GraspTask.curvature_range = {self.curvature_range!r} must contain 0 (the straight "
                              f"finger every episode starts from)")
+        if not (isinstance(self.object_friction, (int, float, np.floating)) and self.object_friction >= 0.0):
+            raise ValueError(f"GraspTask.object_friction = {self.object_friction!r} is outside the allowed range "
+                             f"[0, inf] (dimensionless)")
         _check_interval("object_radius", self.object_radius, "m", *OPTION_RANGES["object_radius"])
         _check_interval("object_density", self.object_density, "kg/m³", *OPTION_RANGES["object_density"])
         _check_interval("current_speed", self.current_speed, "m/s", 0.0, 0.5)
@@ -223,9 +231,11 @@ def task_scene(task: GraspTask, rng: np.random.Generator, options: dict) -> Scen
                                                                       amplitude * math.sin(sway), 0.0)),
                       period=options.get("current_period", period), phase=options.get("current_phase", phase))
     sphere = Sphere(options.get("object_radius", radius), tuple(np.add(task.grasp_point, offset)),
-                    density=options.get("object_density", density))
+                    density=options.get("object_density", density), friction=task.object_friction)
+    palm_friction = min(task.object_friction, 1e5)  # the palm's law is regularised and takes a finite μ
     return Scene(gripper=task.gripper, forces=(Gravity(),) + fluid_forces("water"), fluid=Fluid(current=current),
-                 model=task.model, time_step=task.physics_dt, grasped_object=sphere)
+                 model=task.model, time_step=task.physics_dt, grasped_object=sphere,
+                 contact=ContactSettings(palm_friction=palm_friction))
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,7 @@
 """SoftGripperUnderwater-v0: registration, the Gymnasium and SB3 contracts, determinism, the vector env, the
 scripted baseline against the core simulator, rendering, and bad input."""
 
+import math
 import pickle
 import subprocess
 import sys
@@ -242,6 +243,7 @@ def test_bad_reset_options_raise(env, options, pattern):
     ({"object_radius": (0.06, 0.04)}, r"object_radius = \(0\.06, 0\.04\) must be a \(low, high\) pair"),
     ({"render_mode": "ascii"}, r"render_mode = 'ascii' is not one of"),
     ({"fragile_force": -1.0}, r"fragile_force = -1\.0 N is outside"),
+    ({"object_friction": -0.1}, r"object_friction = -0\.1 is outside the allowed range \[0, inf\]"),
 ])
 def test_bad_settings_raise(settings_, pattern):
     with pytest.raises(ValueError, match=pattern):
@@ -402,3 +404,23 @@ def test_spec_sheet_quotes_the_task_defaults():
               f"{DEFAULT_MAX_EPISODE_STEPS * task.control_dt:g} s"]
     missing = [text for text in quoted if text not in sheet]
     assert not missing, missing
+
+
+def test_the_objects_friction_reaches_the_physics():
+    """The task's object_friction is the sphere's μ and the palm's: with μ = ∞ no contact ever slides, with the
+    default some do, on the same seed."""
+    sliding = {}
+    for friction in (math.inf, GraspTask().object_friction):
+        env = gym.make(ENV_ID, object_friction=friction)
+        policy = ReactivePolicy(GraspTask(object_friction=friction))
+        obs, _ = env.reset(seed=1003)
+        batch = env.unwrapped._batch
+        assert batch.sim.scenes[0].grasped_object.friction == friction
+        assert batch.sim.scenes[0].contact.palm_friction == min(friction, 1e5)
+        slid = 0
+        for _ in range(40):
+            obs, *_ = env.step(policy(obs))
+            contact = batch.sim.step(batch.state, batch.natural_curvature).contact
+            slid += int(contact.sliding.sum())
+        sliding[friction] = slid
+    assert sliding[math.inf] == 0 and sliding[GraspTask().object_friction] > 0
