@@ -355,3 +355,24 @@ def test_a_spinning_sphere_slows_down_by_the_waters_torque():
     assert spin[1] == pytest.approx(exact, rel=0.02)
     assert omega0 - spin[1] > 0.1 * omega0  # the torque matters on this time scale
     assert abs(spin[0]) < 1e-9 and abs(spin[2]) < 1e-9
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_a_squeezed_sphere_below_two_fingertips_is_ejected_without_friction_and_held_with_it(model):
+    """Two opposed fingers close on a neutrally buoyant sphere below their tips: the contact normals point up and
+    inward, so without friction the squeeze pushes it down and out (a wet bar of soap); with μ = 2 the tips grip
+    it and hold it up near the palm."""
+    base = paper_scene(model, medium="water")
+    two = replace(base.gripper, finger_angles=(0.0, math.pi))
+    ends = {}
+    for friction in (0.0, 2.0):
+        sphere = Sphere(0.04, (0.0, 0.0, -0.14), density=WATER_DENSITY, friction=friction)
+        sim = Simulator(replace(base, gripper=two, grasped_object=sphere))
+        state = sim.initial_state()
+        for _ in range(250):
+            result = sim.step(state, max(-0.6 * state.time, -0.3))
+            assert result.converged.all()
+            state = result.state
+        ends[friction] = (state.body_position[0, 2], state.held[0].any(axis=1).sum())
+    assert ends[0.0][0] < -0.25 and ends[0.0][1] == 0  # squeezed out below the gripper
+    assert ends[2.0][0] > -0.1 and ends[2.0][1] == 2  # held by both fingers
