@@ -64,7 +64,7 @@ class RewardWeights:
 class GraspTask:
     """Settings of the underwater grasp task (SI units). Ranges are (low, high) and drawn uniformly at reset."""
 
-    model: str = "planar"
+    model: str = "3d"
     """Rod model of the fingers: ``"planar"`` or ``"3d"``."""
     gripper: GripperDesign = field(default_factory=lambda: GripperDesign(paper_finger()))
     """The gripper: its fingers (design, count and directions) set the sizes of the action and the observation.

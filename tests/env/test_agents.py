@@ -10,6 +10,8 @@ import pytest
 
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
 from agents.scripted import RampPolicy
+from soft_gripper_env.env import observation_bounds
+from soft_gripper_env.grasp_task import GraspTask
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -17,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_sb3_vec_env_autoresets_in_the_same_step_and_reports_truncation():
     env = SoftGripperSB3VecEnv(num_envs=2, seed=3, max_episode_steps=3)
     obs = env.reset()
-    assert obs.shape == (2, 309) and obs.dtype == np.float32
+    assert obs.shape == (2, observation_bounds(GraspTask())[0].size) and obs.dtype == np.float32
     for _ in range(3):
         env.step_async(np.full((2, 3), -0.3, dtype=np.float32))
         obs, reward, done, infos = env.step_wait()

@@ -20,6 +20,7 @@ from soft_gripper_env.env import (
     DEFAULT_MAX_EPISODE_STEPS,
     SoftGripperUnderwaterEnv,
     SoftGripperUnderwaterVectorEnv,
+    observation_bounds,
     observation_slices,
 )
 from soft_gripper_env.grasp_task import GraspTask
@@ -53,7 +54,7 @@ def test_make_without_import_registers_and_sets_the_time_limit():
             "print(env.spec.max_episode_steps, env.observation_space.shape)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["60", "(309,)"]
+    assert out.stdout.split() == ["60", f"({observation_bounds(GraspTask())[0].size},)"]
 
 
 def test_gymnasium_and_sb3_checkers_pass_without_warnings(env):
@@ -122,10 +123,10 @@ def test_thousand_random_steps_stay_finite_and_inside_the_space():
 def test_paper_scene_with_the_scripted_ramp_reproduces_the_core_simulator():
     """The env rollout of the paper's exact scene (fixed ball, Stokes drag, no buoyancy) with the constant rate
     −0.15 1/s equals the core simulator's direct run of that scene to 1e-9 m at every control step."""
-    env = gym.make(ENV_ID)
+    env = gym.make(ENV_ID, model="planar")
     obs, _ = env.reset(seed=0, options={"scene": "paper"})
     policy = RampPolicy()
-    layout = observation_slices(GraspTask())
+    layout = observation_slices(GraspTask(model="planar"))
     reference = run_ramp(replace(paper_scene(grasped_object=PAPER_BALL), natural_curvature_rate=PAPER_RATE))
     positions = [obs[layout["node_positions"]]]
     for _ in range(20):  # 1 s
@@ -301,7 +302,7 @@ def test_reactive_policy_closes_until_caged_then_squeezes_by_curvature():
     press_action = 0.05 / task.max_curvature_rate
 
     def act(finger_forces, curvature):
-        obs = np.zeros(309, dtype=np.float32)
+        obs = np.zeros(observation_bounds(task)[0].size, dtype=np.float32)
         forces = np.zeros((3, 20))
         forces[:, 10] = finger_forces
         obs[layout["normal_forces"]] = forces.ravel()
@@ -319,7 +320,7 @@ def test_reactive_policy_closes_until_caged_then_squeezes_by_curvature():
                                atol=1e-5)
     # κ̄ = 0 on every finger: a new episode, the touch curvatures are forgotten
     np.testing.assert_allclose(act([0.0, 0.0, 0.0], 0.0), approach_action)
-    batch = np.stack([np.zeros(309, dtype=np.float32)] * 2)
+    batch = np.stack([np.zeros(observation_bounds(task)[0].size, dtype=np.float32)] * 2)
     assert policy(batch).shape == (2, 3)
     with pytest.raises(ValueError, match=r"rate = -2\.0 1/s is outside"):
         RampPolicy(rate=-2.0)
