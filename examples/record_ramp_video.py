@@ -23,7 +23,7 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--out", type=Path, default=Path("out") / "video", help="output folder")
     parser.add_argument("--policy", choices=("ramp", "reactive"), default="ramp")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--model", choices=("planar", "3d"), default="planar")
+    parser.add_argument("--model", choices=("planar", "3d"), default="3d")
     args = parser.parse_args(argv)
     env = gym.make(soft_gripper_env.ENV_ID, render_mode="rgb_array", model=args.model)
     env = gym.wrappers.RecordVideo(env, str(args.out), name_prefix=args.policy, episode_trigger=lambda _: True,
