@@ -526,6 +526,7 @@ def _unrotate_steps(first_rod, holds, work):
     dim = basis.shape[0]
     stride = work.x0.shape[1] // normals.shape[1]
     value = np.empty(dim)
+    columns = work.x_coupling.shape[2] if work.x_coupling.shape[0] > 0 else 0  # X only with a body
     for f in range(work.active.size):
         if not work.active[f]:
             continue
@@ -535,7 +536,6 @@ def _unrotate_steps(first_rod, holds, work):
                 continue
             tangent_basis(normals[f, i], basis)
             first = stride * i
-            columns = work.x_coupling.shape[2] if work.x_coupling.shape[0] > 0 else 0  # X only with a body
             for column in range(-1, columns):
                 for d in range(dim):
                     value[d] = 0.0
