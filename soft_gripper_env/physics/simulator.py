@@ -18,9 +18,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .kernels.assembly import RodArrays, StepInputs, assemble
+from .kernels.assembly import N_DESIGN_FIELDS, RodArrays, StepInputs, assemble
 from .kernels.body import BodyArrays, BodyMotion, BodyState, palm_reactions
 from .kernels.contact import normal_reactions, object_in_rod_frames
+from .kernels.finger_contact import FingerContact, find_near_fingers
 from .kernels.forces import rod_water_velocity
 from .kernels.rod_3d import rod3d_elastic, rod3d_update_frames
 from .kernels.rod_planar import planar_elastic
@@ -170,7 +171,12 @@ class Simulator:
         """Newton's tolerance on a force DOF, relative_tolerance·EI/L² [N]."""
         self._structure = _structure(scene)
         self._force_terms = ForceTerms.of(disc, scene.forces, scene.fluid)
-        self._rods = RodArrays.of(disc)  # 3-D: the frames are the state's, bundled per step (_rod_arrays)
+        contact = scene.contact
+        self._finger_contact = FingerContact.of(disc, contact.finger_contact_stiffness, contact.finger_friction,
+                                                first_free_node=0 if scene.gripper.finger.clamp == "free" else 2)
+        if not self._finger_contact.active:  # one finger, or contact off: the kernels skip it
+            self._finger_contact = self._finger_contact._replace(stiffness=0.0)
+        self._rods = RodArrays.of(disc, self._finger_contact)  # 3-D: the frames are the state's (_rod_arrays)
         self._plain_rods, self._plain_terms = plain(self._rods), plain(self._force_terms)
         self._no_acceleration = np.empty((0, 0, 0))
         directions = disc.finger_directions
@@ -419,9 +425,16 @@ class Simulator:
         R = q.shape[0]
         force = np.empty(q.shape)
         band = np.empty((R, disc.n_dofs, disc.band_width + 1))
-        step = StepInputs(q_old, q_pred, natural_curvature, self._water(time)[1], dt)
+        step = StepInputs(q_old, q_pred, natural_curvature, self._water(time)[1], dt, self._near_buffer())
+        find_near_fingers(q_old, q_pred, self._finger_contact, step.near)
         assemble(q, step, self._rod_arrays(frames_old), self._force_terms, hessian, force, band)
         return force, band
+
+    def _near_buffer(self) -> np.ndarray:
+        """A new array for the fingers near each other in a step (:attr:`StepInputs.near`), empty without finger
+        contact."""
+        shape = (self.n_rods, self.disc.n_nodes, self.n_fingers) if self._finger_contact.stiffness > 0 else (0, 0, 0)
+        return np.empty(shape, dtype=np.int64)
 
     def _rod_arrays(self, frames) -> RodArrays:
         """The rods' constants with the 3-D frames of a state (:meth:`_frames`), as the kernels take them."""
@@ -482,7 +495,7 @@ class Simulator:
         q = np.empty((R, N, S))
         velocity, acceleration = np.empty(state.q.shape), np.empty(state.q.shape)
         frames_old = self._frames(state)
-        rods = self._plain_rods if frames_old is None else self._plain_rods[:5] + frames_old
+        rods = self._plain_rods if frames_old is None else self._plain_rods[:N_DESIGN_FIELDS] + frames_old
         solver = self._per_step(dt)
         water = self._water(state.time)[1]
         held = body = result = None
@@ -493,7 +506,7 @@ class Simulator:
                                    self._plain_terms, solver, end_in_kernel, q, velocity.reshape(R, N, S),
                                    acceleration.reshape(R, N, S))
         else:
-            step = StepInputs(q_old, np.empty((R, N, S)), natural_curvature, water, dt)
+            step = StepInputs(q_old, np.empty((R, N, S)), natural_curvature, water, dt, self._near_buffer())
             result = SolveResult(np.empty(R, dtype=bool), np.empty(R, dtype=np.int64), np.empty(R),
                                  np.empty((R, disc.n_dofs)), np.zeros(R, dtype=np.int64), np.zeros(R, dtype=bool))
             predict(q_old, v_old, acceleration_old, dt, step.q_pred, q)

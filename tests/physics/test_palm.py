@@ -16,7 +16,8 @@ from soft_gripper_env.physics import (
     Sphere,
     paper_scene,
 )
-from soft_gripper_env.physics.kernels.body import PALM_STICK_SPEED, BodyMotion, BodyState, body_residual
+from soft_gripper_env.physics.kernels.body import BodyMotion, BodyState, body_residual
+from soft_gripper_env.physics.kernels.contact import STICK_SPEED
 from soft_gripper_env.physics.scene.forces import BodyLoads, fluid_forces
 from soft_gripper_env.physics.simulator import BodyModel
 
@@ -124,7 +125,7 @@ def test_a_floating_sphere_rolls_along_a_frictional_palm_and_slides_along_a_fric
     u, omega = state.body_velocity[0], state.body_angular_velocity[0]
     contact_point_velocity = u + np.cross(omega, [0.0, 0.0, RADIUS])
     assert u[0] > 0.005  # carried along
-    assert abs(contact_point_velocity[0]) < 2 * PALM_STICK_SPEED
+    assert abs(contact_point_velocity[0]) < 2 * STICK_SPEED
     assert omega[1] < -0.1  # rolling: ω_y = −u_x/R
     assert result.contact.palm_reaction[0, 2] == pytest.approx(lift, rel=0.02)
     state, _ = _floating_sphere_in_a_current(0.0)

@@ -25,6 +25,7 @@ from numba import njit
 from ..scene.discretization import Discretization
 from ..scene.fluid import Fluid
 from ..scene.forces import ForceModel, ForceTerms
+from .finger_contact import FingerContact, finger_contact_rod
 from .forces import added_mass, linear_damping, morison_drag, rod_water_velocity
 from .rod_3d import rod3d_elastic_rod
 from .rod_planar import planar_elastic_rod
@@ -45,6 +46,8 @@ class RodArrays(NamedTuple):
     """GJ at each node [N·m²], (N,)."""
     voronoi_length: np.ndarray
     """Rest length attributed to each node [m], (N,)."""
+    fingers: FingerContact
+    """The constants of contact between a gripper's fingers (:class:`~.finger_contact.FingerContact`)."""
     tangent: np.ndarray
     """Start-of-step unit tangent of every edge, (R, N − 1, 3); (0, 0, 3) in the planar model."""
     director: np.ndarray
@@ -53,10 +56,22 @@ class RodArrays(NamedTuple):
     """Start-of-step reference twist at every node [rad], (R, N); (0, 0) in the planar model."""
 
     @classmethod
-    def of(cls, disc: Discretization) -> RodArrays:
-        """The arrays of ``disc``, without frames (a state's are put in with ``_replace``)."""
+    def of(cls, disc: Discretization, fingers: FingerContact) -> RodArrays:
+        """The arrays of ``disc`` with the contact between its fingers, without frames (a state's are put in with
+        ``_replace``)."""
         return cls(disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness, disc.twist_stiffness,
-                   disc.voronoi_length, np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))
+                   disc.voronoi_length, fingers, np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))
+
+
+N_DESIGN_FIELDS = 6
+"""The fields of :class:`RodArrays` that a design fixes, which come before a state's frames."""
+
+
+@njit(cache=True)
+def named_rods(rods):
+    """:class:`RodArrays` from its fields as plain tuples (:func:`~..solvers.newton.plain`), named again, the
+    finger contact's too."""
+    return RodArrays(rods[0], rods[1], rods[2], rods[3], rods[4], FingerContact(*rods[5]), rods[6], rods[7], rods[8])
 
 
 class StepInputs(NamedTuple):
@@ -72,6 +87,9 @@ class StepInputs(NamedTuple):
     """The water's velocity at every rod, in its coordinates, (R, D) [m/s]."""
     dt: float
     """Δt [s]."""
+    near: np.ndarray
+    """The nearest edge of each other finger to each node at the start of the step, −1 where it is far, (R, N, F)
+    int (:func:`~.finger_contact.find_near_fingers`); empty without finger contact."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -128,6 +146,7 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, velocity, accele
             acceleration[i, k] = (q[r, i, k] - step.q_pred[r, i, k]) / (dt * dt)
     external_forces_rod(q[r, :, :dim], step.q_old[r, :, :dim], velocity, acceleration, step.water[r], terms,
                         1.0 / dt, 1.0 / (dt * dt), stride, force, band)
+    finger_contact_rod(r, q, step.q_old, step.q_pred, dt, rods.fingers, step.near, hessian, force, band)
     return energy
 
 
@@ -169,5 +188,5 @@ def evaluate_force(model: ForceModel, disc: Discretization, fluid: Fluid, ctx: S
                     disc.stride, force, system_band)
 
 
-__all__ = ["RodArrays", "StepInputs", "external_forces_rod", "external_forces", "assemble_rod", "assemble",
-           "StepContext", "evaluate_force"]
+__all__ = ["RodArrays", "N_DESIGN_FIELDS", "named_rods", "StepInputs", "external_forces_rod", "external_forces",
+           "assemble_rod", "assemble", "StepContext", "evaluate_force"]

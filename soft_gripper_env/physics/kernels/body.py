@@ -43,6 +43,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from .contact import STICK_SPEED
+
 
 class BodyArrays(NamedTuple):
     """The grasped objects of a batch of B grippers, one each, as the kernels take them (body frame = world at
@@ -129,12 +131,6 @@ def _translational_mass(b, body, orientation_old, mass):
             mass[i, j] = total
 
 
-PALM_STICK_SPEED = 1e-3
-"""The slip speed [m/s] below which the palm's friction grows in proportion to the slip instead of at the full
-μ·N: a regularised stick, so that the friction has a derivative for Newton's method. A body held against the palm
-creeps at most this fast under a tangential load below μ·N."""
-
-
 @njit(cache=True, error_model="numpy")
 def _palm_contact(b, body, c, velocity, omega, orientation, vertical_mass, dt, load, matrix):
     """Adds the palm's force and torque on body b (6,) [N, N·m] to ``load``, and their negated derivatives by the
@@ -145,7 +141,7 @@ def _palm_contact(b, body, c, velocity, omega, orientation, vertical_mass, dt, l
     d(δ) = 2·√(k·M)·min(δ/δ_d, 1) (critical for the body's vertical mass M once δ ≥ δ_d, ``palm_damping_depth``)
     grows from zero with the overlap: the force is continuous at first touch and never pulls. Coulomb friction
     −μ·N·s/√(|s|² + v_s²) opposes the slip s, the horizontal velocity of the body's point on the palm
-    (v_s = :data:`PALM_STICK_SPEED`). The overlap's dependence on the horizontal position and the orientation is
+    (v_s = :data:`~.contact.STICK_SPEED`). The overlap's dependence on the horizontal position and the orientation is
     left out of the derivatives. ``velocity`` and ``omega`` (3,) are the body's over the step, ``orientation``
     (3, 3) its R."""
     stiffness, palm_radius = body.palm_stiffness, body.palm_radius
@@ -187,7 +183,7 @@ def _palm_contact(b, body, c, velocity, omega, orientation, vertical_mass, dt, l
         slip = np.empty(2)  # u + ω × a, horizontal
         slip[0] = velocity[0] + omega[1] * arm[2] - omega[2] * arm[1]
         slip[1] = velocity[1] + omega[2] * arm[0] - omega[0] * arm[2]
-        norm = math.sqrt(slip[0] ** 2 + slip[1] ** 2 + PALM_STICK_SPEED**2)
+        norm = math.sqrt(slip[0] ** 2 + slip[1] ** 2 + STICK_SPEED**2)
         d_slip = np.zeros((2, 6))  # ∂slip/∂(c, θ): u = (c − c_old)/Δt, ω = θ/Δt
         d_slip[0, 0] = d_slip[1, 1] = 1.0 / dt
         d_slip[0, 4], d_slip[0, 5] = arm[2] / dt, -arm[1] / dt

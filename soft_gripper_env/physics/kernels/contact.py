@@ -23,6 +23,11 @@ from numba import njit
 
 from ..scene.objects import GraspedObject
 
+STICK_SPEED = 1e-3
+"""The slip speed [m/s] below which a regularised friction (the palm's, and the fingers' on each other) grows in
+proportion to the slip instead of at the full μ·N, so that it has a derivative for Newton's method. A surface held
+by it under a tangential load below μ·N creeps at most this fast."""
+
 
 class ObjectView(NamedTuple):
     """The grasped object as each rod sees it, in the rod's coordinates (R rods, D coordinates)."""

@@ -145,6 +145,12 @@ class ContactSettings:
     """Contact between the fingers' surfaces and the object's: node i touches at the object's radius plus the
     finger's radius there (its radius profile, so a variable-stiffness finger too). False puts contact on the
     fingers' centre lines, as the paper does (:func:`~.scene.paper_scene` keeps that for its figures)."""
+    finger_contact_stiffness: float = 2000.0
+    """The fingers' surfaces keep out of each other's with this force per overlap [N/m] (0.5 mm of overlap per
+    newton; of the order of the silicone's Young's modulus times one edge's length, ``docs/contact.md``); 0 lets
+    them pass through each other, as the paper's fingers do."""
+    finger_friction: float = DEFAULT_FRICTION
+    """Coulomb friction coefficient μ between two fingers (dimensionless); 0 is frictionless."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_corrector_iterations, (int, np.integer)) or \
@@ -158,6 +164,10 @@ class ContactSettings:
         if not isinstance(self.finger_thickness, (bool, np.bool_)):
             raise ValueError(f"ContactSettings.finger_thickness = {self.finger_thickness!r} must be True or False")
         check_range("ContactSettings", "palm_friction", self.palm_friction, "(dimensionless)", 0.0, 1e6,
+                    low_inclusive=True)
+        check_range("ContactSettings", "finger_contact_stiffness", self.finger_contact_stiffness, "N/m", 0.0, 1e9,
+                    low_inclusive=True)
+        check_range("ContactSettings", "finger_friction", self.finger_friction, "(dimensionless)", 0.0, 1e6,
                     low_inclusive=True)
 
 

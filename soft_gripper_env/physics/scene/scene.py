@@ -132,14 +132,15 @@ def paper_scene(model: RodModel = "planar", *, material: Material = ELASTOSIL_MA
     at water's viscosity and no buoyancy; ``"air"`` has no fluid force; ``"water"`` has buoyancy, Morison drag and
     added mass. A tuple of force models replaces them, e.g. ``(PAPER_DEFECTIVE_DRAG,)``. ``grasped_object`` adds
     contact, e.g. with the paper's fixed ball :data:`~.objects.PAPER_BALL`; the contact is on the fingers' centre
-    lines, as the paper has it (``ContactSettings(finger_thickness=False)``).
+    lines, and the fingers pass through each other, as the paper has it
+    (``ContactSettings(finger_thickness=False, finger_contact_stiffness=0)``).
     """
 
     forces: tuple[ForceModel, ...] = (Gravity(),)
     forces += tuple(medium) if isinstance(medium, tuple) else fluid_forces(medium)
     finger = paper_finger(material, variable_stiffness)
     return Scene(gripper=GripperDesign(finger), forces=forces, model=model, grasped_object=grasped_object,
-                 contact=ContactSettings(finger_thickness=False))
+                 contact=ContactSettings(finger_thickness=False, finger_contact_stiffness=0.0))
 
 
 def cantilever_scene(n_nodes: int = 20, clamp: ClampConvention = "accurate", model: RodModel = "planar") -> Scene:

@@ -30,9 +30,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..kernels.assembly import RodArrays, StepInputs
+from ..kernels.assembly import StepInputs, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, BodyState, body_in_rod_frames, planar_body_basis, turned
 from ..kernels.contact import ObjectView, distance_to_segment, find_penetrations, within_reach
+from ..kernels.finger_contact import find_near_fingers
 from ..scene.forces import ForceTerms
 from ..scene.objects import PENETRATION_TOLERANCE
 from .newton import BodyCoupling, Holds, SolverArrays, SolveResult, newton
@@ -95,7 +96,8 @@ def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, f
     contacts into ``result`` (:class:`~.newton.SolveResult`). Every bundle arrives as its fields in plain tuples
     (:func:`~.newton.plain`) and is named again here; the loop is compiled apart for fixed and free objects.
     """
-    step, rods, terms, solver = StepInputs(*step), RodArrays(*rods), ForceTerms(*terms), SolverArrays(*solver)
+    step, rods, terms, solver = StepInputs(*step), named_rods(rods), ForceTerms(*terms), SolverArrays(*solver)
+    find_near_fingers(step.q_old, step.q_pred, rods.fingers, step.near)
     holds, geometry, result = Holds(*holds), ContactGeometry(*geometry), SolveResult(*result)
     if free_body is None:
         _correct(q, step, rods, terms, solver, holds, hold_at, geometry, None, result)

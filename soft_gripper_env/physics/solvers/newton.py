@@ -29,9 +29,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..kernels.assembly import RodArrays, StepInputs, assemble_rod
+from ..kernels.assembly import StepInputs, assemble_rod, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
 from ..kernels.contact import onto_surface, rotate_node, tangent_basis
+from ..kernels.finger_contact import near_fingers_of_gripper
 from ..kernels.linalg import factor_banded_symmetric, solve_factored
 from ..scene.forces import ForceTerms
 
@@ -213,7 +214,8 @@ def newton(q, step, rods, terms, solver, free, holds, coupling, solve, result):
     then reads in that frame). Writes every solved rod's ``converged``, ``iterations``, ``ratio`` and ``residual``
     into ``result`` (:class:`SolveResult`). A rod whose factorisation fails stops with ratio inf.
     """
-    work = _new_work(q, step.water.shape[1], solver.n_fingers, coupling is not None, holds is not None)
+    work = _new_work(q, step.water.shape[1], solver.n_fingers, coupling is not None, holds is not None,
+                     step.near.size > 0)
     for b in range(q.shape[0] // solver.n_fingers):
         _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve, result, work)
 
@@ -245,12 +247,15 @@ class _NewtonWork(NamedTuple):
     band_row: np.ndarray
     normals: np.ndarray
     basis: np.ndarray
+    rubbing: np.ndarray
+    last_ratio: np.ndarray
 
 
 @njit(cache=True, error_model="numpy")
-def _new_work(q, dim, n_fingers, coupled, contact):
-    """The work arrays; those only a body's solve (``coupled``) or a contact's (``contact``) uses are empty, and
-    shared, otherwise: every allocation counts in the rods' own step, a few tens of microseconds."""
+def _new_work(q, dim, n_fingers, coupled, contact, fingers):
+    """The work arrays; those only a body's solve (``coupled``), a contact's (``contact``) or the line search of
+    fingers touching each other (``fingers``) uses are empty, and shared, otherwise: every allocation counts in the
+    rods' own step, a few tens of microseconds."""
     n_nodes, stride = q.shape[1], q.shape[2]
     n = n_nodes * stride
     band_width = 3 * stride - 1
@@ -260,13 +265,15 @@ def _new_work(q, dim, n_fingers, coupled, contact):
     rods = (np.empty((n_nodes, stride)), np.empty((n_nodes, dim)), np.empty((n_nodes, dim)),
             np.empty((n_fingers, n, band_width + 1)))
     surface = (np.zeros((n_fingers, n_nodes, dim)), np.empty((dim, dim))) if contact else (tensor, matrix)
+    surface = surface + (np.zeros(n_fingers, dtype=np.bool_), np.empty(n_fingers))
     if coupled:
         return _NewtonWork(*rods, np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)), np.empty((n_fingers, n, 6)),
                            np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)), np.zeros((n_fingers, n)), *flags,
                            np.empty(6), np.empty((6, 6)), np.empty(6), np.empty(6), np.empty((3, 3)),
                            np.empty((n, 6)), np.empty(n), np.empty(band_width + 1), *surface)
-    return _NewtonWork(*rods, tensor, np.empty((n_fingers, n)), tensor, tensor, matrix, matrix, *flags, vector, matrix,
-                       vector, vector, matrix, matrix, vector, np.empty(band_width + 1), *surface)
+    rod_delta = np.zeros((n_fingers, n)) if fingers else matrix
+    return _NewtonWork(*rods, tensor, np.empty((n_fingers, n)), tensor, tensor, matrix, rod_delta, *flags, vector,
+                       matrix, vector, vector, matrix, matrix, vector, np.empty(band_width + 1), *surface)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -295,6 +302,8 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
         touching[f] = False
         if coupling is not None:
             touching[f] = holds.held[first + f].any()
+        elif step.near.size > 0:  # a rod near another finger takes a line search (kernels/finger_contact.py)
+            work.rubbing[f] = (step.near[first + f] >= 0).any()
     gripper_ratio = np.inf
     halvings = 0
     iterations = 0
@@ -310,19 +319,22 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
         for f in range(n_fingers):
             if not active[f]:
                 continue
-            if holds is not None:
-                if coupling is not None:
-                    if touching[f]:
-                        _place_held_nodes(b, first + f, q, holds, coupling, work.coupling[f], work.normals[f],
-                                          work.body_residual)
-                else:
-                    _slide_on_fixed_object(first + f, q, holds, work.normals[f])
-            rod_ratio[f], largest = _rod_residual(first + f, q, step, rods, terms, solver, measured,
-                                                  residual[first + f], x0[f], largest, bands[f], scratch)
-            if holds is not None:
-                rod_ratio[f], largest = _slide_rows(first + f, holds, work.normals[f], residual[first + f], x0[f],
-                                                    bands[f], solver.tolerance_inverse, rod_ratio[f], largest,
-                                                    work.basis)
+            if holds is not None and coupling is not None and touching[f]:
+                _place_held_nodes(b, first + f, q, holds, coupling, work.coupling[f], work.normals[f],
+                                  work.body_residual)
+            rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds, coupling,
+                                                residual[first + f], x0[f], largest, bands[f], scratch, work.normals[f],
+                                                work.basis)
+            if coupling is None and work.rubbing[f]:
+                if it > 0:  # back off a step that made the rod's residual worse
+                    halving = 0
+                    while not rod_ratio[f] < work.last_ratio[f] and halving < MAX_STEP_HALVINGS:
+                        halving += 1
+                        _back_off_rod(first + f, q, work.rod_delta[f], 0.5**halving)
+                        rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds,
+                                                            coupling, residual[first + f], x0[f], largest, bands[f],
+                                                            scratch, work.normals[f], work.basis)
+                work.last_ratio[f] = rod_ratio[f]
             if coupling is not None:
                 if touching[f]:
                     _load_body(x0[f], work.coupling[f], work.body_residual)
@@ -377,6 +389,30 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
                     iterations_of[first + f] += 1
     if coupled:
         _finish_gripper(first, n_fingers, False, iterations, gripper_ratio, result)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _rod_system(r, q, step, rods, terms, solver, measured, holds, coupling, residual, right_hand_side, largest, band,
+                scratch, normals, basis):
+    """Rod r's Newton system at ``q``: its sliding nodes put onto a fixed object's surface, then
+    :func:`_rod_residual` and :func:`_slide_rows`. Returns the rod's largest scaled residual and ``largest``."""
+    if holds is not None and coupling is None:
+        _slide_on_fixed_object(r, q, holds, normals)
+    own, largest = _rod_residual(r, q, step, rods, terms, solver, measured, residual, right_hand_side, largest, band,
+                                 scratch)
+    if holds is not None:
+        own, largest = _slide_rows(r, holds, normals, residual, right_hand_side, band, solver.tolerance_inverse, own,
+                                   largest, basis)
+    return own, largest
+
+
+@njit(cache=True, error_model="numpy")
+def _back_off_rod(r, q, rod_delta, fraction):
+    """Takes ``fraction`` of rod r's last Newton step ``rod_delta`` (n,) back."""
+    stride = q.shape[2]
+    for i in range(q.shape[1]):
+        for s in range(stride):
+            q[r, i, s] -= fraction * rod_delta[i * stride + s]
 
 
 @njit(cache=True, error_model="numpy")
@@ -664,7 +700,7 @@ def _apply_step(b, first, q, coupling, work):
     """Moves every active rod by its Newton step, x0 − X·δ (δ the body's step, for rods that touch it; both are zero
     on fixed DOFs), and the body by δ; remembers the rods' steps for the line search."""
     x0, x_coupling, body_step, rod_delta = work.x0, work.x_coupling, work.body_step, work.rod_delta
-    active, touching_rods = work.active, work.touching
+    active, touching_rods, rubbing = work.active, work.touching, work.rubbing
     n_nodes, stride = q.shape[1], q.shape[2]
     for f in range(active.size):
         if not active[f]:
@@ -678,7 +714,7 @@ def _apply_step(b, first, q, coupling, work):
                 if touching:
                     for k in range(6):
                         delta -= x_coupling[f, j, k] * body_step[k]
-                if coupling is not None:  # for the line search, which only a body's solve has
+                if coupling is not None or rubbing[f]:  # for the line search of a body's or a rubbing rod's solve
                     rod_delta[f, j] = delta
                 q[r, i, s] += delta
     if coupling is not None:
@@ -719,19 +755,21 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
     predictor. ``rods``, ``terms`` and ``solver`` are the fields of :class:`~..kernels.assembly.RodArrays`,
     :class:`~..scene.forces.ForceTerms` and :class:`SolverArrays` as plain tuples (:func:`plain`). Writes the new
     coordinates, velocities and accelerations (R, N, S); returns :func:`per_gripper`'s summary."""
-    rods, terms, solver = RodArrays(*rods), ForceTerms(*terms), SolverArrays(*solver)
+    rods, terms, solver = named_rods(rods), ForceTerms(*terms), SolverArrays(*solver)
     n_rods, n_nodes, stride = q_old.shape
     dim = water.shape[1]
-    step = StepInputs(q_old, np.empty(q_old.shape), natural_curvature, water, dt)
+    near_shape = (n_rods, n_nodes, solver.n_fingers) if rods.fingers.stiffness > 0.0 else (0, 0, 0)
+    step = StepInputs(q_old, np.empty(q_old.shape), natural_curvature, water, dt, np.empty(near_shape, np.int64))
     result = SolveResult(np.zeros(n_rods, dtype=np.bool_), np.zeros(n_rods, dtype=np.int64), np.full(n_rods, np.inf),
                          np.empty((n_rods, n_nodes * stride)), np.zeros(n_rods, dtype=np.int64),
                          np.zeros(n_rods, dtype=np.bool_))
     every_rod = np.ones(n_rods, dtype=np.bool_)
-    work = _new_work(q, dim, solver.n_fingers, False, False)
+    work = _new_work(q, dim, solver.n_fingers, False, False, step.near.size > 0)
     for b in range(n_rods // solver.n_fingers):  # gripper by gripper, while its rods' arrays are in cache
         rods_of_b = range(b * solver.n_fingers, (b + 1) * solver.n_fingers)
         for r in rods_of_b:
             _predict_rod(r, q_old, velocity_old, acceleration_old, dt, step.q_pred, q)
+        near_fingers_of_gripper(b * solver.n_fingers, q_old, step.q_pred, rods.fingers, step.near)
         _solve_gripper(b, q, step, rods, terms, solver, solver.clamp_free, None, None, every_rod, result, work)
         for r in rods_of_b:
             _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
