@@ -95,10 +95,11 @@ def test_straight_fingers_at_their_shared_root_do_not_touch():
     disc, contact = _two_opposed_fingers()
     assert contact.eligible.any()
     assert not contact.eligible[:, :2].any()  # clamped nodes
-    assert contact.eligible[0, 2, 1, 0]  # node 2 is 21 mm from the other's root, more than two radii (20 mm)
+    # nodes 2 and 3 are 21 and 32 mm from the other's root: within and beyond two radii (20 mm) plus 10 mm
+    assert not contact.eligible[0, 2, 1, 0] and contact.eligible[0, 3, 1, 0]
     paper = Scene(gripper=GripperDesign(paper_finger()), model="3d").discretization()
     roots = FingerContact.of(paper, 2000.0, 0.3, first_free_node=2).eligible
-    assert not roots[0, 2:4, 1, 0].any() and roots[0, 4, 1, 0]  # 21 and 32 mm < 40 mm < 42 mm
+    assert not roots[0, 2:5, 1, 0].any() and roots[0, 5, 1, 0]  # 21, 32, 42 mm < 40 + 10 mm < 53 mm
     q = disc.rest_q.copy()
     near = np.empty((2, disc.n_nodes, 2), dtype=np.int64)
     find_near_fingers(q, q, contact, near)

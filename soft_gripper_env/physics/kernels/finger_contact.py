@@ -30,8 +30,9 @@ steps can overshoot back and forth across the stick; a rod whose fingers touch t
 made its residual worse (a line search, :mod:`..solvers.newton`).
 
 Which pairs may touch is decided once, at rest: the fingers share the palm at their roots, so a node and another
-finger's edge that overlap when the fingers are straight never count (:func:`FingerContact.of`). Which of them are
-near is decided once per step (:func:`find_near_fingers`), so a solve only looks at a few edges around the nearest.
+finger's edge that overlap, or nearly, when the fingers are straight never count (:func:`FingerContact.of`).
+Which of them are near is decided once per step (:func:`find_near_fingers`), so a solve only looks at a few edges
+around the nearest.
 """
 
 from __future__ import annotations
@@ -47,6 +48,9 @@ from .contact import STICK_SPEED, distance_to_segment
 
 SEARCH_WINDOW = 2
 """Edges on each side of the nearest one at the start of the step that a solve searches for the nearest point."""
+
+CHUNK_EDGES = 4
+"""Edges per run that the search for near fingers first tests as a whole, by a sphere around it."""
 
 NEAR_MARGIN = 5e-3
 """Least distance beyond contact [m] within which a node counts as near another finger at the start of a step (the
@@ -64,7 +68,7 @@ class FingerContact(NamedTuple):
     """The finger's radius at each node [m], (N,)."""
     eligible: np.ndarray
     """Whether node i of finger f may touch the edge j of finger o, (F, N, F, N − 1) bool: not a clamped node, and
-    clear of that edge when the fingers are straight."""
+    clear of that edge by more than twice :data:`NEAR_MARGIN` when the fingers are straight."""
     axes: np.ndarray
     """Each finger's coordinate axes in the world, (F, D, 3): a node's world position is Σ_d q_d·axes[d], and its
     coordinates are axes·x."""
@@ -90,7 +94,8 @@ class FingerContact(NamedTuple):
                     for i in range(first_free_node, n_nodes):
                         for j in range(n_nodes - 1):
                             distance = distance_to_segment(rest[f, i], rest[o, j], rest[o, j + 1], nearest)
-                            eligible[f, i, o, j] = distance > radius[i] + max(radius[j], radius[j + 1])
+                            reach = radius[i] + max(radius[j], radius[j + 1])
+                            eligible[f, i, o, j] = distance > reach + 2.0 * NEAR_MARGIN
         return cls(float(stiffness), float(friction), disc.node_radius.copy(), eligible, np.ascontiguousarray(axes))
 
     @property
@@ -158,7 +163,8 @@ def find_near_fingers(q_old, q_pred, contact, near):
 def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near):
     """For the gripper whose rods start at ``first_rod``: the nearest eligible edge of each other finger o to each
     node i of each rod r at the start of the step, into ``near[r, i, o]`` where the node is within the reach plus
-    :data:`NEAR_MARGIN` plus both fingers' predicted motion, else −1. Arrays (R, N, S); ``contact`` is
+    :data:`NEAR_MARGIN` plus twice the node's and the other finger's nearby nodes' predicted motion, else
+    −1. Arrays (R, N, S); ``contact`` is
     :class:`FingerContact`; ``near`` (R, N, F) int (empty, and left alone, without finger contact)."""
     stiffness, radius, eligible, axes = contact.stiffness, contact.radius, contact.eligible, contact.axes
     if stiffness == 0.0:
@@ -167,27 +173,56 @@ def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near):
     for f in range(n_fingers):
         near[first_rod + f, :, :] = -1
     old = np.empty((n_fingers, n_nodes, 3))
-    motion = np.zeros(n_fingers)  # the largest predicted displacement of each finger's nodes over the step [m]
+    motion = np.empty((n_fingers, n_nodes))  # each node's predicted displacement over the step [m]
     point = np.empty(3)
     for f in range(n_fingers):
         _finger_world(q_old[first_rod + f], axes[f], old[f])
         for i in range(n_nodes):
             _world(q_pred[first_rod + f, i], axes[f], point)
-            moved = math.sqrt((point[0] - old[f, i, 0]) ** 2 + (point[1] - old[f, i, 1]) ** 2
-                              + (point[2] - old[f, i, 2]) ** 2)
-            motion[f] = max(motion[f], moved)
+            motion[f, i] = math.sqrt((point[0] - old[f, i, 0]) ** 2 + (point[1] - old[f, i, 1]) ** 2
+                                     + (point[2] - old[f, i, 2]) ** 2)
+    # each finger's edges in runs of CHUNK_EDGES, each within a sphere (centre, radius with the finger's): a node
+    # far from a run's sphere skips its edges, which makes the search cheap while the fingers are apart
+    n_chunks = (n_nodes - 2) // CHUNK_EDGES + 1
+    centres = np.empty((n_fingers, n_chunks, 3))
+    bounds = np.empty((n_fingers, n_chunks))
+    chunk_motion = np.zeros((n_fingers, n_chunks))  # the most a node of the run moves
+    for o in range(n_fingers):
+        for c in range(n_chunks):
+            first_node, last_node = c * CHUNK_EDGES, min((c + 1) * CHUNK_EDGES, n_nodes - 1)
+            for k in range(3):
+                centres[o, c, k] = 0.5 * (old[o, first_node, k] + old[o, last_node, k])
+            bound = 0.0
+            for j in range(first_node, last_node + 1):
+                apart = math.sqrt((old[o, j, 0] - centres[o, c, 0]) ** 2 + (old[o, j, 1] - centres[o, c, 1]) ** 2
+                                  + (old[o, j, 2] - centres[o, c, 2]) ** 2)
+                bound = max(bound, apart + radius[j])
+                chunk_motion[o, c] = max(chunk_motion[o, c], motion[o, j])
+            bounds[o, c] = bound
     nearest = np.empty(3)
     for f in range(n_fingers):
         for i in range(n_nodes):
             for o in range(n_fingers):
                 if o == f:
                     continue
-                distance, edge, t = _nearest_on_finger(old[f, i], old[o], eligible[f, i, o], 0, n_nodes - 2, nearest)
-                if edge < 0:
+                best, best_edge, best_t, best_motion = np.inf, -1, 0.0, 0.0
+                for c in range(n_chunks):
+                    allowance = radius[i] + NEAR_MARGIN + 2.0 * (motion[f, i] + chunk_motion[o, c])
+                    to_centre = math.sqrt((old[f, i, 0] - centres[o, c, 0]) ** 2
+                                          + (old[f, i, 1] - centres[o, c, 1]) ** 2
+                                          + (old[f, i, 2] - centres[o, c, 2]) ** 2)
+                    if to_centre - bounds[o, c] > allowance:
+                        continue
+                    last_edge = min((c + 1) * CHUNK_EDGES, n_nodes - 1) - 1
+                    distance, edge, t = _nearest_on_finger(old[f, i], old[o], eligible[f, i, o], c * CHUNK_EDGES,
+                                                           last_edge, nearest)
+                    if distance < best:
+                        best, best_edge, best_t, best_motion = distance, edge, t, chunk_motion[o, c]
+                if best_edge < 0:
                     continue
-                reach = radius[i] + (1.0 - t) * radius[edge] + t * radius[edge + 1]
-                if distance < reach + NEAR_MARGIN + 2.0 * (motion[f] + motion[o]):
-                    near[first_rod + f, i, o] = edge
+                reach = radius[i] + (1.0 - best_t) * radius[best_edge] + best_t * radius[best_edge + 1]
+                if best < reach + NEAR_MARGIN + 2.0 * (motion[f, i] + best_motion):
+                    near[first_rod + f, i, o] = best_edge
 
 
 @njit(cache=True, error_model="numpy")
@@ -201,6 +236,12 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
     stiffness, mu, radius, eligible, axes = contact.stiffness, contact.friction, contact.radius, contact.eligible, \
         contact.axes
     n_fingers, n_nodes = eligible.shape[0], eligible.shape[1]
+    any_near = False
+    for i in range(n_nodes):
+        for o in range(n_fingers):
+            any_near |= near[r, i, o] >= 0
+    if not any_near:  # the common case, before any work array is made
+        return
     f = r % n_fingers
     first_rod = r - f
     dim = axes.shape[1]
@@ -285,5 +326,5 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
                     band[row, kd - a + b] += value
 
 
-__all__ = ["SEARCH_WINDOW", "NEAR_MARGIN", "FingerContact", "find_near_fingers", "near_fingers_of_gripper",
-           "finger_contact_rod"]
+__all__ = ["SEARCH_WINDOW", "CHUNK_EDGES", "NEAR_MARGIN", "FingerContact", "find_near_fingers",
+           "near_fingers_of_gripper", "finger_contact_rod"]
