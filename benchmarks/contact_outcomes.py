@@ -21,22 +21,23 @@ MODELS = ("planar", "3d")
 POLICIES = ("ramp", "reactive")
 
 
-def run_pair(model: str, policy: str, episodes: int, seed: int) -> dict:
-    """:func:`agents.evaluate.evaluate` of one controller in one model (a worker process)."""
+def run_pair(model: str, policy: str, episodes: int, seed: int, **settings) -> dict:
+    """:func:`agents.evaluate.evaluate` of one controller in one model (a worker process); ``settings`` go to the
+    task (:class:`~soft_gripper_env.grasp_task.GraspTask`), e.g. ``physics_dt``."""
     from agents.evaluate import evaluate
     from agents.scripted import RampPolicy, ReactivePolicy
     from soft_gripper_env.grasp_task import GraspTask
 
-    task = GraspTask(model=model)
+    task = GraspTask(model=model, **settings)
     controller = RampPolicy(task) if policy == "ramp" else ReactivePolicy(task)
-    return evaluate(controller, episodes, seed, progress=False, model=model)
+    return evaluate(controller, episodes, seed, progress=False, model=model, **settings)
 
 
-def agreement(planar: dict, spatial: dict) -> dict:
-    """How the two models' episodes compare, seed by seed: the share with the same success label, and the median
-    and 90th percentile of the distance between the objects' final positions [m]."""
-    same = np.mean(np.equal(planar["successes"], spatial["successes"]))
-    gap = np.linalg.norm(np.subtract(planar["final_object_positions"], spatial["final_object_positions"]), axis=1)
+def agreement(first: dict, second: dict) -> dict:
+    """How two runs' episodes on the same seeds compare, seed by seed: the share with the same success label, and
+    the median and 90th percentile of the distance between the objects' final positions [m]."""
+    same = np.mean(np.equal(first["successes"], second["successes"]))
+    gap = np.linalg.norm(np.subtract(first["final_object_positions"], second["final_object_positions"]), axis=1)
     return {"label_agreement": float(same), "median_position_gap_m": float(np.median(gap)),
             "p90_position_gap_m": float(np.percentile(gap, 90))}
 

@@ -218,9 +218,11 @@ class Simulator:
 
     def set_scene(self, index: int, scene: Scene, start_time: float = 0.0) -> None:
         """Gives gripper ``index`` another scene, which may differ from the batch's only in the grasped object's
-        size, place, density and velocity, and in the current (e.g. a new episode of one environment of a vector).
-        The new scene applies to states made by :meth:`initial_state` from now on. Its current runs on its own
-        clock, which reads 0 at the batch's time ``start_time`` [s]."""
+        size, place, density, velocity and friction, and in the current (e.g. a new episode of one environment of a
+        vector). The new scene applies to states made by :meth:`initial_state` from now on; a free object's size,
+        density and friction, a fixed object's place, size and friction, and the current also apply from the next
+        step of a running state. Its current runs on its own clock, which reads 0 at the batch's time
+        ``start_time`` [s]."""
         if not 0 <= index < self.batch_size:
             raise ValueError(f"index = {index} is outside the allowed range [0, {self.batch_size - 1}]")
         if _structure(scene) != self._structure:

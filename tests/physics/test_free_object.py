@@ -13,6 +13,7 @@ from soft_gripper_env.physics import (
     AddedMass,
     Buoyancy,
     Capsule,
+    ContactSettings,
     Current,
     Fluid,
     MorisonDrag,
@@ -376,3 +377,50 @@ def test_a_squeezed_sphere_below_two_fingertips_is_ejected_without_friction_and_
         ends[friction] = (state.body_position[0, 2], state.held[0].any(axis=1).sum())
     assert ends[0.0][0] < -0.25 and ends[0.0][1] == 0  # squeezed out below the gripper
     assert ends[2.0][0] > -0.1 and ends[2.0][1] == 2  # held by both fingers
+
+
+def test_a_two_finger_pinch_holds_a_sphere_exactly_when_friction_exceeds_the_statics_threshold():
+    """Two opposed fingertips pinch a sphere slightly heavier than water, stuck (μ = ∞), until it rests. The
+    reactions then carry its net weight W = (ρ − ρ_w)·(4/3)·π·R³·g exactly, and the statics of a symmetric
+    two-point pinch, with the squeeze R_x and the contact normal n measured, give the least friction that holds it:
+    μ* = |R_x·n_z + (W/2)·n_x| / (R_x·n_x − (W/2)·n_z). With μ 2 % above μ* the sphere stays where it is; 2 % below,
+    it slides out and falls. The scene is planar (one plane holds both fingers), so the planar model is exact."""
+    radius, density = 0.03, 1050.0
+    base = paper_scene("planar", medium="water")
+    two = replace(base.gripper, finger_angles=(0.0, math.pi))
+
+    def scene(friction):
+        return replace(base, gripper=two, contact=ContactSettings(palm_radius=0.0),
+                       grasped_object=Sphere(radius, (0.0, 0.0, -0.14), density=density, friction=friction))
+
+    sim = Simulator(scene(math.inf))
+    state = sim.initial_state()
+    for _ in range(300):
+        result = sim.step(state, max(-0.6 * state.time, -0.2))
+        state = result.state
+    contact = result.contact
+    net_weight = (density - WATER_DENSITY) * 4.0 / 3.0 * math.pi * radius**3 * 9.81
+    assert np.linalg.norm(state.body_velocity[0]) < 1e-5  # at rest
+    assert contact.reaction[0, ..., 2].sum() == pytest.approx(-net_weight, rel=1e-4)
+    held = np.argwhere(contact.held[0])
+    assert held.tolist() == [[0, 19], [1, 19]]  # one fingertip each
+    centre = state.body_position[0]
+    tip = sim.world_positions(state)[0, 0, 19]
+    normal = (tip - centre) / np.linalg.norm(tip - centre)
+    squeeze = contact.reaction[0, 0, 19, 0]
+    threshold = abs(squeeze * normal[2] + 0.5 * net_weight * normal[0]) / \
+        (squeeze * normal[0] - 0.5 * net_weight * normal[2])
+    assert 0.1 < threshold < 1.0
+    at_rest = state
+    for factor, holds in ((1.02, True), (0.98, False)):
+        sim.set_scene(0, scene(factor * threshold))
+        state = at_rest
+        for _ in range(100):
+            result = sim.step(state, -0.2)
+            assert result.converged.all()
+            state = result.state
+        drop = centre[2] - state.body_position[0, 2]
+        if holds:
+            assert drop < 1e-6 and result.contact.held[0].sum() == 2
+        else:
+            assert drop > 0.1 and not result.contact.held[0].any()
