@@ -118,7 +118,7 @@ class GraspTask:
             raise ValueError(f"GraspTask.model = {self.model!r} is not one of 'planar', '3d'")
         if not isinstance(self.gripper, GripperDesign):
             raise ValueError(f"GraspTask.gripper must be a GripperDesign, got {type(self.gripper).__name__}")
-        check_range("GraspTask", "physics_dt", self.physics_dt, "s", 0.0, 0.05)
+        check_range("GraspTask", "physics_dt", self.physics_dt, "s", 0.0, 0.05, high_inclusive=True)
         check_range("GraspTask", "control_dt", self.control_dt, "s", 0.0, 1.0)
         substeps = self.control_dt / self.physics_dt
         if substeps < 1.0 - 1e-9 or abs(substeps - round(substeps)) > 1e-6:

@@ -239,6 +239,7 @@ def test_bad_reset_options_raise(env, options, pattern):
     ({"model": "2d"}, r"GraspTask\.model = '2d' is not one of 'planar', '3d'"),
     ({"control_dt": 0.025}, r"control_dt = 0\.025 s must be a whole multiple of physics_dt"),
     ({"physics_dt": 0.0}, r"physics_dt = 0\.0 s is outside the allowed range"),
+    ({"physics_dt": 0.06, "control_dt": 0.06}, r"physics_dt = 0\.06 s is outside the allowed range \(0, 0\.05\] s"),
     ({"curvature_range": (-3.0, 0.0)}, r"curvature_range = -3\.0 \(dimensionless\) is outside"),
     ({"curvature_range": (-0.1, -0.05)}, r"must contain 0"),
     ({"object_radius": (0.06, 0.04)}, r"object_radius = \(0\.06, 0\.04\) must be a \(low, high\) pair"),
@@ -249,6 +250,12 @@ def test_bad_reset_options_raise(env, options, pattern):
 def test_bad_settings_raise(settings_, pattern):
     with pytest.raises(ValueError, match=pattern):
         SoftGripperUnderwaterEnv(**settings_)
+
+
+def test_the_largest_physics_step_is_allowed():
+    """physics_dt may be 0.05 s, the documented limit, itself."""
+    env = SoftGripperUnderwaterEnv(physics_dt=0.05)
+    assert env.task.substeps == 1
 
 
 def test_vector_env_bad_input_and_step_before_reset():

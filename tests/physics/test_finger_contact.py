@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from soft_gripper_env.physics import Simulator
+from soft_gripper_env.physics import PENETRATION_TOLERANCE, Simulator, Sphere
 from soft_gripper_env.physics.kernels.contact import STICK_SPEED, distance_to_segment
 from soft_gripper_env.physics.kernels.finger_contact import FingerContact, find_near_fingers, finger_contact_rod
 from soft_gripper_env.physics.scene.design import ELASTOSIL_MA_4601, FingerDesign, GripperDesign, paper_finger
@@ -178,3 +178,60 @@ def test_resting_fingers_push_each_other_equally(closed):
     on_0, on_1 = force_on(0, 1), force_on(1, 0)
     assert np.linalg.norm(on_0) > 0.5
     assert np.linalg.norm(on_0 + on_1) < 0.01 * np.linalg.norm(on_0)
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_fingers_closed_on_a_small_object_touch_it_without_overlapping(model):
+    """A fixed 6 mm sphere where the fingertips meet: all three fingers hold it, none enters it, and their surfaces
+    stay clear of each other; every step converges."""
+    sphere = Sphere(0.006, (0.0, 0.0, -0.124))
+    scene = Scene(gripper=GripperDesign(paper_finger()), forces=(Gravity(),) + fluid_forces("water"), model=model,
+                  grasped_object=sphere)
+    sim = Simulator(scene)
+    state = sim.initial_state()
+    radius = sim.disc.node_radius
+    for _ in range(200):
+        result = sim.step(state, FULL_ACTUATION * min(state.time / 1.0, 1.0))
+        assert result.converged.all()
+        state = result.state
+        positions = sim.world_positions(state)[0]
+        assert _surface_gap(positions, radius) > -1.0e-3
+        surface = np.linalg.norm(positions - np.asarray(sphere.center), axis=-1) - sphere.radius - radius
+        assert surface[:, 2:].min() > -PENETRATION_TOLERANCE
+    assert result.contact.held[0].any(axis=1).all()
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_newton_blocks_are_the_penalty_hessian_on_oblique_normals(model):
+    """Each touching node's block of Newton's matrix is 2·k·n·nᵀ and its force k·δ·n (frictionless, in the rod's
+    coordinates), for two nodes with different normals: one above finger 1's side, one beyond its tip (the normal
+    tilts along the finger). The fingers point at 45° and 225°, so that a planar rod's coordinates mix the world's
+    x and y and every entry of the world block counts."""
+    stiffness, dt, overlap = 2000.0, 0.01, 0.3e-3
+    finger = FingerDesign(length=0.2, n_nodes=20, radius=0.01, material=ELASTOSIL_MA_4601)
+    scene = Scene(gripper=GripperDesign(finger, finger_angles=(math.pi / 4, 5 * math.pi / 4)), model=model)
+    disc = scene.discretization()
+    contact = FingerContact.of(disc, stiffness, 0.0, first_free_node=2)
+    along, up = disc.finger_directions[0], np.array([0.0, 0.0, 1.0])
+    # in finger 0's plane: (along its direction, up); finger 1 lies along −along
+    directions = {14: np.array([0.0, 1.0]), 15: np.array([-0.6, 0.8])}
+    anchors = {14: -0.1, 15: -finger.length}
+    q_old = disc.rest_q.copy()
+    for node, (a, b) in directions.items():
+        world = (anchors[node] + (0.02 - overlap) * a) * along + (0.02 - overlap) * b * up
+        q_old[0, node, :disc.dim] = world if model == "3d" else (world @ along, world[2])
+    near = np.empty((2, disc.n_nodes, 2), dtype=np.int64)
+    find_near_fingers(q_old, q_old, contact, near)
+    force = np.zeros((disc.n_nodes, disc.stride))
+    band = np.zeros((disc.n_dofs, disc.band_width + 1))
+    finger_contact_rod(0, q_old, q_old, q_old, dt, contact, near, True, force, band)
+    kd, dim = disc.band_width, disc.dim
+    for node, (a, b) in directions.items():
+        normal = a * along + b * up
+        if model == "planar":
+            normal = np.array([a, b])
+        np.testing.assert_allclose(force[node, :dim], stiffness * overlap * normal, rtol=1e-9, atol=1e-15)
+        first = disc.stride * node
+        block = np.array([[band[first + i, kd - i + j] if j <= i else band[first + j, kd - j + i] for j in range(dim)]
+                          for i in range(dim)])
+        np.testing.assert_allclose(block, 2.0 * stiffness * np.outer(normal, normal), rtol=1e-9, atol=1e-9)

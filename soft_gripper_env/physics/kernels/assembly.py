@@ -146,7 +146,8 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, velocity, accele
             acceleration[i, k] = (q[r, i, k] - step.q_pred[r, i, k]) / (dt * dt)
     external_forces_rod(q[r, :, :dim], step.q_old[r, :, :dim], velocity, acceleration, step.water[r], terms,
                         1.0 / dt, 1.0 / (dt * dt), stride, force, band)
-    finger_contact_rod(r, q, step.q_old, step.q_pred, dt, rods.fingers, step.near, hessian, force, band)
+    if step.near.size > 0:  # finger contact is on (the test costs less than the call)
+        finger_contact_rod(r, q, step.q_old, step.q_pred, dt, rods.fingers, step.near, hessian, force, band)
     return energy
 
 

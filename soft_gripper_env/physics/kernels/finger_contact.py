@@ -287,6 +287,7 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
                 push = stiffness * overlap
                 for k in range(3):
                     normal[k] = (x[k] - nearest[k]) / distance
+                for k in range(3):  # the whole normal first: the matrix reads every component
                     world_force[k] = push * normal[k]
                     for m in range(3):
                         matrix[k, m] = 2.0 * stiffness * normal[k] * normal[m]

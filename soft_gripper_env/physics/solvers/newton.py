@@ -259,21 +259,24 @@ def _new_work(q, dim, n_fingers, coupled, contact, fingers):
     n_nodes, stride = q.shape[1], q.shape[2]
     n = n_nodes * stride
     band_width = 3 * stride - 1
-    vector, matrix, tensor = np.empty(0), np.empty((0, 0)), np.empty((0, 0, 6))
-    flags = (np.empty(n_fingers), np.empty(n_fingers, dtype=np.bool_), np.zeros(n_fingers, dtype=np.bool_),
-             np.empty(n_fingers, dtype=np.bool_))
-    rods = (np.empty((n_nodes, stride)), np.empty((n_nodes, dim)), np.empty((n_nodes, dim)),
-            np.empty((n_fingers, n, band_width + 1)))
+    vector = np.empty(0)
+    matrix, tensor = vector.reshape((0, 0)), vector.reshape((0, 0, 6))  # views: no allocation of their own
+    # per-rod flags and ratios as rows of two arrays: rod_ratio, last_ratio; active, touching, factored, rubbing
+    ratios, flags = np.empty((2, n_fingers)), np.zeros((4, n_fingers), dtype=np.bool_)
+    motion = np.empty((2, n_nodes, dim))  # velocity and acceleration
+    rods = (np.empty((n_nodes, stride)), motion[0], motion[1], np.empty((n_fingers, n, band_width + 1)))
     surface = (np.zeros((n_fingers, n_nodes, dim)), np.empty((dim, dim))) if contact else (tensor, matrix)
-    surface = surface + (np.zeros(n_fingers, dtype=np.bool_), np.empty(n_fingers))
+    surface = surface + (flags[3], ratios[1])
     if coupled:
         return _NewtonWork(*rods, np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)), np.empty((n_fingers, n, 6)),
-                           np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)), np.zeros((n_fingers, n)), *flags,
-                           np.empty(6), np.empty((6, 6)), np.empty(6), np.empty(6), np.empty((3, 3)),
-                           np.empty((n, 6)), np.empty(n), np.empty(band_width + 1), *surface)
+                           np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)), np.zeros((n_fingers, n)),
+                           ratios[0], flags[0], flags[1], flags[2], np.empty(6), np.empty((6, 6)), np.empty(6),
+                           np.empty(6), np.empty((3, 3)), np.empty((n, 6)), np.empty(n), np.empty(band_width + 1),
+                           *surface)
     rod_delta = np.zeros((n_fingers, n)) if fingers else matrix
-    return _NewtonWork(*rods, tensor, np.empty((n_fingers, n)), tensor, tensor, matrix, rod_delta, *flags, vector,
-                       matrix, vector, vector, matrix, matrix, vector, np.empty(band_width + 1), *surface)
+    return _NewtonWork(*rods, tensor, np.empty((n_fingers, n)), tensor, tensor, matrix, rod_delta, ratios[0], flags[0],
+                       flags[1], flags[2], vector, matrix, vector, vector, matrix, matrix, vector,
+                       np.empty(band_width + 1), *surface)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -659,7 +662,7 @@ def _rods_continue(first, it, max_iterations, result, work):
 def _body_step(b, basis, work):
     """The body's Newton step (6,) into ``work.body_step``, from the reduced system Bᵀ·A·B δ = −Bᵀ·G + Bᵀ·Σ rhs
     (A the body's matrix plus the rods' Schur complements; unused columns of B get the identity). Returns False,
-    with no step, where the system is not finite."""
+    with no step, where the system is not finite or is singular."""
     matrix = work.body_matrix
     for f in range(work.block.shape[0]):
         for i in range(6):
@@ -685,8 +688,8 @@ def _body_step(b, basis, work):
                 for j in range(6):
                     value += basis[i, k] * matrix[i, j] * basis[j, m]
             reduced[k, m] = value + (1.0 if k == m and not used else 0.0)
-    if not (np.isfinite(reduced).all() and np.isfinite(reduced_rhs).all()):
-        return False  # a diverged iterate: the solve fails instead of raising
+    if not (np.isfinite(reduced).all() and np.isfinite(reduced_rhs).all()) or np.linalg.det(reduced) == 0.0:
+        return False  # a diverged iterate, or a singular system (the solve would raise): the solve fails instead
     solution = np.linalg.solve(reduced, reduced_rhs)
     for i in range(6):
         step[i] = 0.0
@@ -760,16 +763,18 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
     dim = water.shape[1]
     near_shape = (n_rods, n_nodes, solver.n_fingers) if rods.fingers.stiffness > 0.0 else (0, 0, 0)
     step = StepInputs(q_old, np.empty(q_old.shape), natural_curvature, water, dt, np.empty(near_shape, np.int64))
-    result = SolveResult(np.zeros(n_rods, dtype=np.bool_), np.zeros(n_rods, dtype=np.int64), np.full(n_rods, np.inf),
-                         np.empty((n_rods, n_nodes * stride)), np.zeros(n_rods, dtype=np.int64),
-                         np.zeros(n_rods, dtype=np.bool_))
-    every_rod = np.ones(n_rods, dtype=np.bool_)
+    counts, flags = np.zeros((2, n_rods), dtype=np.int64), np.zeros((3, n_rods), dtype=np.bool_)  # fewer allocations
+    result = SolveResult(flags[0], counts[0], np.full(n_rods, np.inf), np.empty((n_rods, n_nodes * stride)), counts[1],
+                         flags[1])
+    every_rod = flags[2]
+    every_rod[:] = True
     work = _new_work(q, dim, solver.n_fingers, False, False, step.near.size > 0)
     for b in range(n_rods // solver.n_fingers):  # gripper by gripper, while its rods' arrays are in cache
         rods_of_b = range(b * solver.n_fingers, (b + 1) * solver.n_fingers)
         for r in rods_of_b:
             _predict_rod(r, q_old, velocity_old, acceleration_old, dt, step.q_pred, q)
-        near_fingers_of_gripper(b * solver.n_fingers, q_old, step.q_pred, rods.fingers, step.near)
+        if step.near.size > 0:
+            near_fingers_of_gripper(b * solver.n_fingers, q_old, step.q_pred, rods.fingers, step.near)
         _solve_gripper(b, q, step, rods, terms, solver, solver.clamp_free, None, None, every_rod, result, work)
         for r in rods_of_b:
             _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
