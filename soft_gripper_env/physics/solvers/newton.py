@@ -287,10 +287,12 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
     converged, iterations_of, ratio = result.converged, result.iterations, result.ratio
     residual, mass_term, bands, x0 = result.residual, solver.mass_term, work.bands, work.x0
     scratch = (work.force, work.velocity, work.acceleration)
+    rubbing, last_ratio = work.rubbing, work.last_ratio
     measured = free if holds is None else holds.measured
     n_fingers = solver.n_fingers
     first = b * n_fingers
     coupled = coupling is not None  # every branch on the body tests ``coupling`` itself, so None prunes them
+    fingers_touch = step.near.size > 0
     any_rod = False
     for f in range(n_fingers):
         active[f] = coupled or solve[first + f]
@@ -305,8 +307,8 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
         touching[f] = False
         if coupling is not None:
             touching[f] = holds.held[first + f].any()
-        elif step.near.size > 0:  # a rod near another finger takes a line search (kernels/finger_contact.py)
-            work.rubbing[f] = (step.near[first + f] >= 0).any()
+        elif fingers_touch:  # a rod near another finger takes a line search (kernels/finger_contact.py)
+            rubbing[f] = (step.near[first + f] >= 0).any()
     gripper_ratio = np.inf
     halvings = 0
     iterations = 0
@@ -328,16 +330,16 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
             rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds, coupling,
                                                 residual[first + f], x0[f], largest, bands[f], scratch, work.normals[f],
                                                 work.basis)
-            if coupling is None and work.rubbing[f]:
+            if coupling is None and rubbing[f]:
                 if it > 0:  # back off a step that made the rod's residual worse
                     halving = 0
-                    while not rod_ratio[f] < work.last_ratio[f] and halving < MAX_STEP_HALVINGS:
+                    while not rod_ratio[f] < last_ratio[f] and halving < MAX_STEP_HALVINGS:
                         halving += 1
                         _back_off_rod(first + f, q, work.rod_delta[f], 0.5**halving)
                         rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds,
                                                             coupling, residual[first + f], x0[f], largest, bands[f],
                                                             scratch, work.normals[f], work.basis)
-                work.last_ratio[f] = rod_ratio[f]
+                last_ratio[f] = rod_ratio[f]
             if coupling is not None:
                 if touching[f]:
                     _load_body(x0[f], work.coupling[f], work.body_residual)
