@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._timing import save_plot
+
 MODELS = ("planar", "3d")
 POLICIES = ("ramp", "reactive")
 
@@ -43,16 +45,24 @@ def agreement(first: dict, second: dict) -> dict:
             "p90_position_gap_m": float(np.percentile(gap, 90))}
 
 
-def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--episodes", type=int, default=300)
-    parser.add_argument("--seed", type=int, default=5000, help="the first seed (default 5000)")
+def parse_run_arguments(parser: argparse.ArgumentParser, argv: list[str] | None, episodes: int, seed: int,
+                        name: str) -> argparse.Namespace:
+    """Adds the options of an episode benchmark (--episodes, --seed, --workers, --json out/NAME.json, --plot
+    out/NAME.png) to ``parser`` and parses ``argv``, refusing fewer than one episode or worker."""
+    parser.add_argument("--episodes", type=int, default=episodes)
+    parser.add_argument("--seed", type=int, default=seed, help=f"the first seed (default {seed})")
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--json", type=Path, default=Path("out") / "contact_outcomes.json")
-    parser.add_argument("--plot", type=Path, default=Path("out") / "contact_outcomes.png")
+    parser.add_argument("--json", type=Path, default=Path("out") / f"{name}.json")
+    parser.add_argument("--plot", type=Path, default=Path("out") / f"{name}.png")
     args = parser.parse_args(argv)
     if args.episodes < 1 or args.workers < 1:
         parser.error("--episodes and --workers must be at least 1")
+    return args
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    args = parse_run_arguments(parser, argv, 300, 5000, "contact_outcomes")
     pairs = [(model, policy) for model in MODELS for policy in POLICIES]
     print(f"{args.episodes} episodes for each of {len(pairs)} (model, controller) pairs, {args.workers} at a time ...",
           flush=True)
@@ -111,10 +121,7 @@ def _plot(results: dict, path: Path) -> None:
         ax.set_xlabel("x [mm]")
         ax.set_ylabel("z [mm]")
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    print(f"wrote {path}")
+    save_plot(fig, path)
 
 
 if __name__ == "__main__":

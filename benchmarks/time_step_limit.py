@@ -15,21 +15,15 @@ import json
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from .contact_outcomes import MODELS, POLICIES, agreement, run_pair
+from ._timing import save_plot
+from .contact_outcomes import MODELS, POLICIES, agreement, parse_run_arguments, run_pair
 
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--dts", type=float, nargs="+", default=[0.01, 0.025, 0.05],
                         help="physics time steps [s]; the first is the reference")
-    parser.add_argument("--episodes", type=int, default=100)
-    parser.add_argument("--seed", type=int, default=7000, help="the first seed (default 7000)")
-    parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--json", type=Path, default=Path("out") / "time_step_limit.json")
-    parser.add_argument("--plot", type=Path, default=Path("out") / "time_step_limit.png")
-    args = parser.parse_args(argv)
-    if args.episodes < 1 or args.workers < 1:
-        parser.error("--episodes and --workers must be at least 1")
+    args = parse_run_arguments(parser, argv, 100, 7000, "time_step_limit")
     runs = [(model, policy, dt) for dt in args.dts for model in MODELS for policy in POLICIES]
     print(f"{args.episodes} episodes for each of {len(runs)} (model, controller, Δt) runs, {args.workers} at a "
           "time ...", flush=True)
@@ -85,10 +79,7 @@ def _plot(rows: list[dict], path: Path) -> None:
     for ax in (failures, agree):
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    print(f"wrote {path}")
+    save_plot(fig, path)
 
 
 if __name__ == "__main__":
