@@ -76,7 +76,8 @@ class FingerContact(NamedTuple):
     @classmethod
     def of(cls, disc: Discretization, stiffness: float, friction: float, first_free_node: int) -> FingerContact:
         """The contact of fingers discretized as ``disc`` with ``stiffness`` [N/m] and ``friction`` μ; nodes below
-        ``first_free_node`` are clamped and never count."""
+        ``first_free_node`` are clamped and never count. Where no pair of nodes and edges may touch (one finger, or
+        ``stiffness`` 0), the stiffness is 0: contact is off."""
         n_fingers, n_nodes = len(disc.finger_directions), disc.n_nodes
         if disc.dim == 3:
             axes = np.broadcast_to(np.eye(3), (n_fingers, 3, 3)).copy()
@@ -96,11 +97,9 @@ class FingerContact(NamedTuple):
                             distance = distance_to_segment(rest[f, i], rest[o, j], rest[o, j + 1], nearest)
                             reach = radius[i] + max(radius[j], radius[j + 1])
                             eligible[f, i, o, j] = distance > reach + 2.0 * NEAR_MARGIN
-        return cls(float(stiffness), float(friction), disc.node_radius.copy(), eligible, np.ascontiguousarray(axes))
-
-    @property
-    def active(self) -> bool:
-        return bool(self.stiffness > 0.0 and self.eligible.any())
+        # one finger, or no pair that may touch: stiffness 0, which the kernels read as off
+        stiffness = float(stiffness) if eligible.any() else 0.0
+        return cls(stiffness, float(friction), disc.node_radius.copy(), eligible, np.ascontiguousarray(axes))
 
 
 @njit(cache=True, error_model="numpy")

@@ -731,11 +731,8 @@ def _apply_step(b, first, q, coupling, work):
 @njit(cache=True, error_model="numpy")
 def _back_off(b, first, q, motion, work, fraction):
     """Takes ``fraction`` of the last Newton step back, rods and body (the line search of a free body's solve)."""
-    n = work.rod_delta.shape[1]
     for f in range(work.active.size):
-        q_r = q[first + f].reshape(n)
-        for j in range(n):
-            q_r[j] -= fraction * work.rod_delta[f, j]
+        _back_off_rod(first + f, q, work.rod_delta[f], fraction)
     for k in range(3):
         motion.position[b, k] -= fraction * work.body_step[k]
         motion.rotation[b, k] -= fraction * work.body_step[3 + k]
