@@ -1,6 +1,8 @@
 """Speed against error: a work-precision sweep over Δt, node count, integrator, rod model and drag model.
 
     python -m benchmarks.speed_vs_error --out out/speed_vs_error [--quick] [--repeats N]
+    python -m benchmarks.speed_vs_error --out out/speed_vs_error --grasp-outcomes [--episodes 200] [--seed 7000]
+        [--workers 2]
 
 Scenes (SI):
 
@@ -21,6 +23,13 @@ converged reference of the same scene, model and drag (implicit midpoint, or bac
 Δt = 2.5e-4 s, N = 80): the error is the largest distance between the two fingertips [m], sampled every 0.02 s.
 Writes DIR/speed_vs_error.csv, one work-precision plot per scene (DIR/<scene>.png), and prints the settings that
 meet the issue's goals. ``--quick`` runs the cantilever scenes on a smaller grid in under 3 minutes.
+
+``--grasp-outcomes`` runs the grasp-outcome scene instead: the environment's own task, on ``--episodes`` seeds under
+the ramp and the reactive controller, once per speed setting in :data:`OUTCOME_SETTINGS` and once with the fine
+reference (3-D, N = 20, Δt = 2.5e-3 s, Newton tolerance 1e-9). For each setting it reports how often the success
+label agrees with the reference's, seed by seed, how far apart the two leave the object (median and 90th
+percentile), and the setting's speed in env steps per second (its own episodes' wall time, ``--workers`` settings
+at a time, so a ratio between settings, not an absolute). Writes DIR/grasp_outcomes.json and DIR/grasp_outcomes.png.
 """
 
 from __future__ import annotations
@@ -28,6 +37,7 @@ from __future__ import annotations
 import argparse
 import csv
 import itertools
+import json
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -59,6 +69,24 @@ DAMPED_DEFLECTION = 14.95e-3
 GRASP_CURVATURE = 0.25
 """|κ̄| at which the grasp scene's fingers stop closing (dimensionless), holding the sphere below the palm."""
 REFERENCE = {"dt": 2.5e-4, "n_nodes": 80, "integrator": "implicit_midpoint"}
+OUTCOME_REFERENCE = "reference"
+OUTCOME_DEFAULT = "3d, dt 0.01"
+OUTCOME_SETTINGS = {
+    OUTCOME_REFERENCE: {"model": "3d", "physics_dt": 0.0025, "newton": NewtonSettings(relative_tolerance=1e-9)},
+    "3d, dt 0.0025, tol 1e-6": {"model": "3d", "physics_dt": 0.0025},
+    "3d, dt 0.005": {"model": "3d", "physics_dt": 0.005},
+    OUTCOME_DEFAULT: {"model": "3d"},
+    "3d, dt 0.01, tol 1e-4": {"model": "3d", "newton": NewtonSettings(relative_tolerance=1e-4)},
+    "3d, dt 0.025": {"model": "3d", "physics_dt": 0.025},
+    "3d, dt 0.05": {"model": "3d", "physics_dt": 0.05},
+    "planar, dt 0.01": {"model": "planar"},
+    "planar, dt 0.025": {"model": "planar", "physics_dt": 0.025},
+}
+"""The grasp-outcome scene's settings (GraspTask fields), by label. N = 20 in all: the task's κ̄ is per node, so
+another node count would be another gripper. The second row is the reference at the default tolerance: how far
+the outcome of an episode moves under a change far below anything the other settings make (the floor of the
+agreement any setting can reach)."""
+OUTCOME_GOALS = {"label_agreement": 0.95, "median_position_gap_m": 0.005}
 
 
 @dataclass(frozen=True)
@@ -147,10 +175,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="cantilever scenes on a small grid (< 3 minutes)")
     parser.add_argument("--repeats", type=int, default=3,
                         help="timed passes over the grid; each case's best counts (default 3)")
+    parser.add_argument("--grasp-outcomes", action="store_true",
+                        help="the grasp-outcome scene: each speed setting's episodes against the fine reference's")
+    parser.add_argument("--episodes", type=int, default=200, help="seeds per controller (--grasp-outcomes)")
+    parser.add_argument("--seed", type=int, default=7000, help="the first seed (--grasp-outcomes)")
+    parser.add_argument("--workers", type=int, default=2, help="settings run at a time (--grasp-outcomes)")
     args = parser.parse_args(argv)
-    if args.repeats < 1:
-        parser.error(f"--repeats = {args.repeats} must be at least 1")
+    if args.repeats < 1 or args.episodes < 1 or args.workers < 1:
+        parser.error("--repeats, --episodes and --workers must be at least 1")
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.grasp_outcomes:
+        grasp_outcomes(args.episodes, args.seed, args.workers, args.out)
+        return 0
     cases = grid(args.quick)
     references = {}
     rows = []
@@ -244,6 +280,108 @@ def report_goals(rows) -> None:
     stable = [r for r in damped if r[4] == 5e-2]
     print(f"Δt = 5e-2 on the damped cantilever: {sum(np.isfinite(r[6]) for r in stable)} of {len(stable)} runs "
           "converged on every step")
+
+
+def grasp_outcomes(episodes: int, seed: int, workers: int, out: Path) -> dict:
+    """The grasp-outcome study (see the module's docstring); returns what it writes to grasp_outcomes.json."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from benchmarks.contact_outcomes import POLICIES, agreement, run_pair
+
+    jobs = [(label, policy) for label in OUTCOME_SETTINGS for policy in POLICIES]
+    results = {}
+    with ProcessPoolExecutor(workers) as pool:
+        futures = {job: pool.submit(run_pair, OUTCOME_SETTINGS[job[0]]["model"], job[1], episodes, seed,
+                                    **{k: v for k, v in OUTCOME_SETTINGS[job[0]].items() if k != "model"})
+                   for job in jobs}
+        for job, future in tqdm(futures.items(), desc="grasp outcomes", unit="run", file=sys.stdout):
+            results[job] = future.result()
+    summary = {"episodes": episodes, "first_seed": seed, "reference": OUTCOME_REFERENCE, "default": OUTCOME_DEFAULT,
+               "goals": OUTCOME_GOALS, "settings": {}}
+    print(f"\n{episodes} seeds from {seed} per controller; agreement with the reference "
+          f"({', '.join(f'{k} = {v}' for k, v in _describe(OUTCOME_REFERENCE).items())})\n")
+    print("| setting | controller | success | labels agree | median gap [mm] | 90th pct [mm] | solver failures |"
+          " env steps/s |\n|---|---|---|---|---|---|---|---|")
+    for label in OUTCOME_SETTINGS:
+        row = {"task": _describe(label), "controllers": {}}
+        for policy in POLICIES:
+            result = results[(label, policy)]
+            agree = agreement(result, results[(OUTCOME_REFERENCE, policy)])
+            speed = result["mean_length"] * result["episodes"] / result["seconds"]
+            row["controllers"][policy] = {**agree, "success_rate": result["success_rate"],
+                                          "solver_failures": result["endings"]["solver_failure"],
+                                          "env_steps_per_s": speed, "successes": result["successes"],
+                                          "final_object_positions": result["final_object_positions"]}
+            print(f"| {label} | {policy} | {result['success_rate']:.2f} | {agree['label_agreement']:.3f} |"
+                  f" {1e3 * agree['median_position_gap_m']:.2f} | {1e3 * agree['p90_position_gap_m']:.1f} |"
+                  f" {result['endings']['solver_failure']} | {speed:.0f} |")
+        controllers = row["controllers"].values()
+        row["worst_label_agreement"] = min(c["label_agreement"] for c in controllers)
+        row["worst_median_position_gap_m"] = max(c["median_position_gap_m"] for c in controllers)
+        row["env_steps_per_s"] = float(np.mean([c["env_steps_per_s"] for c in controllers]))
+        row["meets_goals"] = bool(label == OUTCOME_REFERENCE or (
+            row["worst_label_agreement"] >= OUTCOME_GOALS["label_agreement"]
+            and row["worst_median_position_gap_m"] <= OUTCOME_GOALS["median_position_gap_m"]))
+        summary["settings"][label] = row
+    print(f"\ngoals: labels agree on ≥ {OUTCOME_GOALS['label_agreement']:.0%} of seeds, median gap ≤ "
+          f"{1e3 * OUTCOME_GOALS['median_position_gap_m']:g} mm, under both controllers")
+    for label, row in summary["settings"].items():
+        if label != OUTCOME_REFERENCE:
+            print(f"  {label}: {'meets' if row['meets_goals'] else 'misses'} them (worst agreement "
+                  f"{row['worst_label_agreement']:.3f}, worst median gap {1e3 * row['worst_median_position_gap_m']:.2f}"
+                  f" mm){'  <- the default' if label == OUTCOME_DEFAULT else ''}")
+    (out / "grasp_outcomes.json").write_text(json.dumps(summary, indent=1))
+    print(f"wrote {out / 'grasp_outcomes.json'}")
+    plot_grasp_outcomes(summary, out / "grasp_outcomes.png")
+    return summary
+
+
+def _describe(label: str) -> dict:
+    """A setting's GraspTask fields, as JSON-ready values."""
+    task = {key: value.relative_tolerance if isinstance(value, NewtonSettings) else value
+            for key, value in OUTCOME_SETTINGS[label].items()}
+    task.setdefault("physics_dt", 0.01)
+    task.setdefault("newton", NewtonSettings().relative_tolerance)
+    return {"model": task["model"], "physics_dt_s": task["physics_dt"], "newton_relative_tolerance": task["newton"],
+            "n_nodes": 20}
+
+
+def plot_grasp_outcomes(summary: dict, path: Path) -> None:
+    """Env speed against outcome error, one point per setting and controller, the default marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(12, 4.6), sharex=True)
+    goals = summary["goals"]
+    for k, (label, row) in enumerate(summary["settings"].items()):
+        if label == summary["reference"]:
+            continue
+        for policy, marker in zip(row["controllers"], ("o", "s"), strict=False):
+            c = row["controllers"][policy]
+            default = label == summary["default"]
+            style = {"marker": marker, "color": f"C{k % 10}", "s": 90 if default else 40,
+                     "edgecolor": "k" if default else "none", "label": f"{label}, {policy}"}
+            ax0.scatter(c["env_steps_per_s"], 1.0 - c["label_agreement"], **style)
+            ax1.scatter(c["env_steps_per_s"], 1e3 * c["median_position_gap_m"], **style)
+            if default and policy == next(iter(row["controllers"])):
+                for ax, y in ((ax0, 1.0 - c["label_agreement"]), (ax1, 1e3 * c["median_position_gap_m"])):
+                    ax.annotate("default", (c["env_steps_per_s"], y), xytext=(6, 6), textcoords="offset points",
+                                fontsize=8)
+    ax0.axhline(1.0 - goals["label_agreement"], color="k", ls="--", lw=1, label="goal (at most)")
+    ax1.axhline(1e3 * goals["median_position_gap_m"], color="k", ls="--", lw=1, label="goal (at most)")
+    ax0.set_ylabel("share of seeds whose success label differs from the reference's")
+    ax1.set_ylabel("median distance between final object positions [mm]")
+    for ax in (ax0, ax1):
+        ax.set_xscale("log")
+        ax.set_xlabel("env steps per second (one core, relative between settings)")
+        ax.grid(True, which="both", alpha=0.3)
+    ax1.legend(fontsize=6, ncol=2, loc="upper left")
+    fig.suptitle(f"grasp outcomes against the fine reference (3-D, Δt = 2.5 ms, tolerance 1e-9), "
+                 f"{summary['episodes']} seeds per controller")
+    save_plot(fig, path)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

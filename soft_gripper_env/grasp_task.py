@@ -20,6 +20,7 @@ from .physics import (
     Fluid,
     Gravity,
     GripperDesign,
+    NewtonSettings,
     RodState,
     Scene,
     Simulator,
@@ -73,6 +74,8 @@ class GraspTask:
     """Time between actions [s]; a multiple of ``physics_dt``."""
     physics_dt: float = 0.01
     """Implicit physics step [s]."""
+    newton: NewtonSettings = field(default_factory=NewtonSettings)
+    """Stopping rule of the Newton solve inside each physics step (relative tolerance 1e-6 by default)."""
     max_curvature_rate: float = 0.5
     """Natural-curvature rate of an action of ±1 [1/s] (κ̄ per node at the gripper's 20 nodes per finger)."""
     curvature_range: tuple[float, float] = (-0.2, 0.0)
@@ -149,6 +152,8 @@ class GraspTask:
                            ("hold_distance", "m"), ("rest_speed", "m/s"), ("success_duration", "s"),
                            ("lost_distance", "m")):
             check_range("GraspTask", name, getattr(self, name), unit, 0.0, 1e3)
+        if not isinstance(self.newton, NewtonSettings):
+            raise ValueError(f"GraspTask.newton must be a NewtonSettings, got {type(self.newton).__name__}")
         if not isinstance(self.reward, RewardWeights):
             raise ValueError(f"GraspTask.reward must be a RewardWeights, got {type(self.reward).__name__}")
 
@@ -216,7 +221,7 @@ def task_scene(task: GraspTask, rng: np.random.Generator, options: dict) -> Scen
     task's gripper (the paper's, unless the task names another)."""
     if options.get("scene") == "paper":
         return replace(paper_scene(task.model, grasped_object=PAPER_BALL), gripper=task.gripper,
-                       time_step=task.physics_dt)
+                       time_step=task.physics_dt, newton=task.newton)
     # every draw is made, fixed or not, so that fixing one quantity leaves the others' draws unchanged
     radius = rng.uniform(*task.object_radius)
     density = rng.uniform(*task.object_density)
@@ -234,7 +239,7 @@ def task_scene(task: GraspTask, rng: np.random.Generator, options: dict) -> Scen
                     density=options.get("object_density", density), friction=task.object_friction)
     palm_friction = min(task.object_friction, 1e5)  # the palm's law is regularised and takes a finite μ
     return Scene(gripper=task.gripper, forces=(Gravity(),) + fluid_forces("water"), fluid=Fluid(current=current),
-                 model=task.model, time_step=task.physics_dt, grasped_object=sphere,
+                 model=task.model, time_step=task.physics_dt, newton=task.newton, grasped_object=sphere,
                  contact=ContactSettings(palm_friction=palm_friction))
 
 

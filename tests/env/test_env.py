@@ -24,7 +24,7 @@ from soft_gripper_env.env import (
     observation_slices,
 )
 from soft_gripper_env.grasp_task import GraspTask
-from soft_gripper_env.physics import PAPER_BALL, paper_scene, run_ramp
+from soft_gripper_env.physics import PAPER_BALL, NewtonSettings, paper_scene, run_ramp
 
 ENV_ID = soft_gripper_env.ENV_ID
 
@@ -246,10 +246,22 @@ def test_bad_reset_options_raise(env, options, pattern):
     ({"render_mode": "ascii"}, r"render_mode = 'ascii' is not one of"),
     ({"fragile_force": -1.0}, r"fragile_force = -1\.0 N is outside"),
     ({"object_friction": -0.1}, r"object_friction = -0\.1 is outside the allowed range \[0, inf\]"),
+    ({"newton": 1e-6}, r"GraspTask\.newton must be a NewtonSettings, got float"),
 ])
 def test_bad_settings_raise(settings_, pattern):
     with pytest.raises(ValueError, match=pattern):
         SoftGripperUnderwaterEnv(**settings_)
+
+
+def test_the_newton_setting_reaches_the_solver():
+    """GraspTask.newton sets the simulator's stopping rule: a looser tolerance takes fewer Newton iterations."""
+    iterations = {}
+    for tolerance in (1e-9, 1e-3):
+        env = SoftGripperUnderwaterEnv(model="planar", newton=NewtonSettings(relative_tolerance=tolerance))
+        env.reset(seed=0)
+        assert env.unwrapped._batch.sim.scene.newton.relative_tolerance == tolerance
+        iterations[tolerance] = sum(env.step(np.full(3, -1.0))[4]["newton_iterations"] for _ in range(5))
+    assert iterations[1e-3] < iterations[1e-9]
 
 
 def test_the_largest_physics_step_is_allowed():
