@@ -1,30 +1,50 @@
-"""Environment steps per second on one core: one env from gym.make, and make_vec at several num_envs.
+"""Environment steps per second against Gymnasium's ``Ant-v5``, measured side by side in one run.
 
-Each configuration resets with seed 0 and then takes random actions for a fixed simulated time (the default
-scene in the planar model, which this benchmark has always timed: fingers in water, a free sphere, a current; 5
-physics steps per action; the environment's default is now the 3-D model); episodes that end are
-reset, by the TimeLimit wrapper's truncation for the single env and by autoreset for the vector. The best of
-``--repeats`` runs counts. Goals (issue 5): ≥ 2,000 steps/s single, ≥ 20,000 env-steps/s batched.
+    python -m benchmarks.env_speed [--json out/env_speed.json] [--plot out/env_speed.png] [--repeats 3] [--quick]
 
-    python -m benchmarks.env_speed [--json FILE] [--plot PNG] [--repeats N] [--steps K]
+What it times, each on random actions from a reset with seed 0, the best of ``--repeats`` runs (a shared machine
+only ever slows a run down):
+
+- the anchor, MuJoCo's ``Ant-v5`` from ``gym.make`` (the ``bench`` extra installs ``gymnasium[mujoco]``), for
+  ``ANT_STEPS`` steps, resetting when an episode ends;
+- ``SoftGripperUnderwater-v0`` from ``gym.make`` (one env) for two episodes' length of actions (``--steps`` twice,
+  resetting when an episode ends), and from ``gym.make_vec`` with 1, 16, 64 and 256 envs for one episode's length
+  each (``--steps`` = 60 actions; autoreset), in the planar and the 3-D model;
+- ``make_vec`` with 64 envs on two threads (``num_threads=2``), in both models.
+
+Every figure is in env steps per second on one core (Numba and BLAS are held to one thread each, and a vector's
+``num_threads`` adds its own), with its ratio to ``Ant-v5``'s figure of the same run. The physics core's goals
+(:mod:`benchmarks.core_speed`: the paper's scene and batched planar µs per gripper-step) are timed in the same run,
+so that every goal of the throughput issue comes from one run. ``--quick`` times 16 and 64 envs only, once.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import time
+from pathlib import Path
 
-import gymnasium as gym
+from benchmarks._timing import save_plot, time_ramp  # (sets one thread first)
+from soft_gripper_env.env import DEFAULT_MAX_EPISODE_STEPS
 
-import soft_gripper_env  # noqa: F401
-from benchmarks._timing import parse_arguments, save_plot  # (sets one thread first)
-
+ANT_STEPS = 3000
 VECTOR_SIZES = (1, 16, 64, 256)
-MODEL = "planar"
+MODELS = ("planar", "3d")
+GOALS = {"single_steps_per_s": 2.0, "vec64_steps_per_s": 10.0, "single_3d_steps_per_s": 0.5,
+         "vec64_3d_steps_per_s": 2.0}
+"""Goals as ratios to Ant-v5 of the same run."""
+TWO_THREAD_GOAL = 1.7
+"""Two threads against one, make_vec(64), planar."""
+CORE_GOALS = {"paper_scene_planar_ms": 2.0, "paper_scene_3d_ms": 10.0, "batched_planar_us_per_gripper_step": 10.0}
+"""The physics core's goals, absolute on the reference 2-core machine."""
 
 
-def time_single(steps: int) -> float:
-    env = gym.make(soft_gripper_env.ENV_ID, model=MODEL)
+def time_ant(steps: int = ANT_STEPS) -> float:
+    """Ant-v5 steps per second on random actions."""
+    import gymnasium as gym
+
+    env = gym.make("Ant-v5")
     env.action_space.seed(0)
     env.reset(seed=0)
     start = time.perf_counter()
@@ -32,52 +52,164 @@ def time_single(steps: int) -> float:
         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
         if terminated or truncated:
             env.reset()
-    return steps / (time.perf_counter() - start)
+    seconds = time.perf_counter() - start
+    env.close()
+    return steps / seconds
 
 
-def time_vector(num_envs: int, steps: int) -> float:
-    env = gym.make_vec(soft_gripper_env.ENV_ID, num_envs=num_envs, model=MODEL)
+def time_single(model: str, steps: int) -> float:
+    """One env's steps per second over ``steps`` random actions, resetting when an episode ends."""
+    import gymnasium as gym
+
+    import soft_gripper_env
+
+    env = gym.make(soft_gripper_env.ENV_ID, model=model)
+    env.action_space.seed(0)
+    env.reset(seed=0)
+    start = time.perf_counter()
+    for _ in range(steps):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
+    seconds = time.perf_counter() - start
+    env.close()
+    return steps / seconds
+
+
+def time_vector(model: str, num_envs: int, steps: int, num_threads: int = 1) -> float:
+    """``make_vec``'s env steps per second over ``steps`` random actions of every env (autoreset)."""
+    import gymnasium as gym
+
+    import soft_gripper_env
+
+    env = gym.make_vec(soft_gripper_env.ENV_ID, num_envs=num_envs, model=model, num_threads=num_threads)
     env.action_space.seed(0)
     env.reset(seed=0)
     start = time.perf_counter()
     for _ in range(steps):
         env.step(env.action_space.sample())
-    return steps * num_envs / (time.perf_counter() - start)
+    seconds = time.perf_counter() - start
+    env.close()
+    return steps * num_envs / seconds
 
 
-def main(argv: list[str] | None = None) -> dict:
-    import argparse
+def best(function, repeats: int, *args) -> float:
+    """The largest of ``repeats`` results of ``function(*args)``, after one untimed call (compilation, caches)."""
+    function(*args)
+    return max(function(*args) for _ in range(repeats))
 
-    extra = argparse.ArgumentParser(add_help=False)
-    extra.add_argument("--steps", type=int, default=40, help="control steps per timed run (default 40)")
-    known, rest = extra.parse_known_args(argv)
-    args = parse_arguments(__doc__, "env_speed.png", rest)
-    time_single(2)  # compile and warm up
-    results = {"single_steps_per_s": max(time_single(known.steps) for _ in range(args.repeats))}
-    for n in VECTOR_SIZES:
-        time_vector(n, 2)
-        results[f"vector_{n}_env_steps_per_s"] = max(time_vector(n, known.steps) for _ in range(args.repeats))
-    print(f"{'configuration':<26}{'env steps/s':>14}")
+
+def time_core(repeats: int) -> dict:
+    """The physics core's goals: the paper's scene in both models [ms], batched planar at B = 64 [µs per
+    gripper-step]."""
+    from soft_gripper_env.physics import paper_scene
+
+    planar, spatial = paper_scene("planar"), paper_scene("3d")
+    return {"paper_scene_planar_ms": 1e3 * time_ramp(planar, 1, repeats)[0],
+            "paper_scene_3d_ms": 1e3 * time_ramp(spatial, 1, repeats)[0],
+            "batched_planar_us_per_gripper_step": 1e6 * time_ramp(planar, 64, repeats)[0] / (planar.n_steps * 64)}
+
+
+def measure(repeats: int, sizes: tuple[int, ...], steps: int) -> dict:
+    """Every figure of the run, anchor first and last (its best counts), with the ratios and goals."""
+    results = {"ant_v5_steps_per_s": best(time_ant, repeats)}
+    for model in MODELS:
+        suffix = "" if model == "planar" else "_3d"
+        print(f"timing {model}: one env ...", flush=True)
+        results[f"single{suffix}_steps_per_s"] = best(time_single, repeats, model, 2 * steps)
+        for n in sizes:
+            print(f"timing {model}: make_vec({n}) ...", flush=True)
+            results[f"vec{n}{suffix}_steps_per_s"] = best(time_vector, repeats, model, n, steps)
+        print(f"timing {model}: make_vec(64) on two threads ...", flush=True)
+        results[f"vec64{suffix}_two_threads_steps_per_s"] = best(time_vector, repeats, model, 64, steps, 2)
+    print("timing the physics core ...", flush=True)
+    core = time_core(repeats)
+    # the anchor again, at the end: a machine that slowed down during the run shows as two different figures
+    results["ant_v5_steps_per_s"] = max(results["ant_v5_steps_per_s"], best(time_ant, repeats))
+    ant = results["ant_v5_steps_per_s"]
+    ratios = {key.removesuffix("_steps_per_s") + "_vs_ant_v5": value / ant for key, value in results.items()
+              if key != "ant_v5_steps_per_s"}
+    threads = {model: results[f"vec64{s}_two_threads_steps_per_s"] / results[f"vec64{s}_steps_per_s"]
+               for model, s in (("planar", ""), ("3d", "_3d")) if f"vec64{s}_steps_per_s" in results}
+    goals = {key: {"goal_vs_ant_v5": goal, "reached_vs_ant_v5": results[key] / ant, "met": results[key] / ant >= goal}
+             for key, goal in GOALS.items() if key in results}
+    if "planar" in threads:
+        goals["vec64_two_threads_over_one"] = {"goal": TWO_THREAD_GOAL, "reached": threads["planar"],
+                                               "met": threads["planar"] >= TWO_THREAD_GOAL}
+    for key, goal in CORE_GOALS.items():
+        goals[key] = {"goal": goal, "reached": core[key], "met": core[key] <= goal}
+    return {**results, "ratios_to_ant_v5": ratios, "two_threads_over_one": threads, "core": core, "goals": goals}
+
+
+def report(results: dict) -> None:
+    ant = results["ant_v5_steps_per_s"]
+    print(f"\n{'configuration':<36}{'steps/s':>10}{'vs Ant-v5':>11}")
+    print(f"{'Ant-v5 (MuJoCo, the anchor)':<36}{ant:>10.0f}{1.0:>10.2f}×")
     for key, value in results.items():
-        print(f"{key:<26}{value:>14.0f}")
-    print("goals: single >= 2000, batched >= 20000 env steps/s")
-    if args.json:
-        args.json.write_text(json.dumps(results, indent=2))
+        if key.endswith("_steps_per_s") and key != "ant_v5_steps_per_s":
+            print(f"{key.removesuffix('_steps_per_s'):<36}{value:>10.0f}{value / ant:>10.2f}×")
+    print("\ngoals:")
+    for key, goal in results["goals"].items():
+        if "goal_vs_ant_v5" in goal:
+            text = f"≥ {goal['goal_vs_ant_v5']:g}× Ant-v5, reached {goal['reached_vs_ant_v5']:.2f}×"
+        elif key.startswith("vec64_two"):
+            text = f"≥ {goal['goal']:g}× one thread, reached {goal['reached']:.2f}×"
+        else:
+            text = f"≤ {goal['goal']:g}, reached {goal['reached']:.2f}"
+        print(f"  {key:<36}{text:<44}{'met' if goal['met'] else 'not met'}")
+
+
+def plot(results: dict, sizes: tuple[int, ...], path: Path) -> None:
+    """Env steps per second against num_envs, per model, as multiples of Ant-v5, with the goals."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(5.5, 3.8))
-    ax.loglog(VECTOR_SIZES, [results[f"vector_{n}_env_steps_per_s"] for n in VECTOR_SIZES], "o-",
-              label="make_vec (one batched simulator)")
-    ax.axhline(results["single_steps_per_s"], color="C1", ls="--", label="gym.make, one env")
-    ax.axhline(20000, color="0.5", ls=":", label="goal, batched")
+    ant = results["ant_v5_steps_per_s"]
+    fig, ax = plt.subplots(figsize=(7, 4.6))
+    for model, suffix, color in (("planar", "", "C0"), ("3-D", "_3d", "C1")):
+        ax.loglog(sizes, [results[f"vec{n}{suffix}_steps_per_s"] / ant for n in sizes], "o-", color=color,
+                  label=f"make_vec, {model}, one thread")
+        ax.scatter([64], [results[f"vec64{suffix}_two_threads_steps_per_s"] / ant], marker="^", s=70, color=color,
+                   label=f"make_vec(64), {model}, two threads", zorder=3)
+        ax.axhline(results[f"single{suffix}_steps_per_s"] / ant, color=color, ls=":", label=f"gym.make, {model}")
+    ax.axhline(1.0, color="k", lw=1.5, label=f"Ant-v5 ({ant:,.0f} steps/s in this run)")
+    for (key, goal), marker in zip(GOALS.items(), ("s", "D", "s", "D"), strict=True):
+        color = "C1" if "3d" in key else "C0"
+        x = 64 if key.startswith("vec64") else sizes[0]
+        ax.scatter([x], [goal], marker=marker, facecolor="none", edgecolor=color, s=90, zorder=3)
+    ax.scatter([], [], marker="s", facecolor="none", edgecolor="0.3", label="goal, one env (at num_envs = 1)")
+    ax.scatter([], [], marker="D", facecolor="none", edgecolor="0.3", label="goal, make_vec(64)")
     ax.set_xlabel("num_envs")
-    ax.set_ylabel("env steps per second (one core)")
+    ax.set_ylabel("env steps per second, as multiples of Ant-v5")
+    ax.set_title("SoftGripperUnderwater-v0 against Gymnasium's Ant-v5, one run")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    save_plot(fig, args.plot)
+    ax.legend(fontsize=7, loc="lower right")
+    save_plot(fig, path)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--json", type=Path, default=Path("out") / "env_speed.json", help="results (JSON)")
+    parser.add_argument("--plot", type=Path, default=Path("out") / "env_speed.png", help="plot (PNG)")
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs per figure; the best counts (default 3)")
+    parser.add_argument("--quick", action="store_true", help="16 and 64 envs only, one timed run each")
+    parser.add_argument("--steps", type=int, default=DEFAULT_MAX_EPISODE_STEPS,
+                        help=f"actions per timed vector run, twice as many for one env (default "
+                             f"{DEFAULT_MAX_EPISODE_STEPS}, an episode)")
+    args = parser.parse_args(argv)
+    if args.repeats < 1 or args.steps < 1:
+        parser.error("--repeats and --steps must be at least 1")
+    sizes = (16, 64) if args.quick else VECTOR_SIZES
+    results = measure(1 if args.quick else args.repeats, sizes, args.steps)
+    results["vector_sizes"] = list(sizes)
+    report(results)
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(results, indent=2) + "\n")
+    print(f"wrote {args.json}")
+    plot(results, sizes, args.plot)
     return results
 
 

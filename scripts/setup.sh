@@ -14,7 +14,7 @@ if [[ ! -f "$stamp" ]]; then
     echo "setup: installing soft-gripper-env and its dependencies into .venv (torch: CPU build)"
     .venv/bin/python -m pip install --quiet --upgrade pip
     .venv/bin/python -m pip install --quiet -c requirements/cpu.txt torch
-    .venv/bin/python -m pip install --quiet -c requirements/cpu.txt -e ".[dev,rl]"
+    .venv/bin/python -m pip install --quiet -c requirements/cpu.txt -e ".[dev,rl,bench]"
     rm -f .venv/.installed-*
     touch "$stamp"
 fi

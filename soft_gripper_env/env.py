@@ -252,7 +252,8 @@ def _single(infos: dict[str, Any]) -> dict[str, Any]:
 
 
 class SoftGripperUnderwaterVectorEnv(VectorEnv):
-    """``num_envs`` copies of :class:`SoftGripperUnderwaterEnv` stepped in one batched simulator.
+    """``num_envs`` copies of :class:`SoftGripperUnderwaterEnv` stepped in one batched simulator, or in
+    ``num_threads`` of them on as many threads.
 
     Seeding, options, spaces, rewards and infos are those of the single env (infos as (num_envs,) arrays, with the
     usual ``"_key"`` masks). Env i of ``reset(seed=s)`` is seeded with s + i, as Gymnasium's ``SyncVectorEnv``
@@ -260,17 +261,27 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
     Gymnasium 1.x's default, ``AutoresetMode.NEXT_STEP``: the step after an episode ends resets that env, ignores
     its action, and returns its first observation with reward 0. The paper's scene (``scene="paper"``) is for the
     single env only.
+
+    ``num_threads`` > 1 splits the envs into that many consecutive shards, each a batched simulator of its own,
+    and steps them on a thread each. The compiled physics releases Python's lock, so the shards' physics runs on
+    separate cores while one shard's Python bookkeeping overlaps the other's physics. Every env's results are those
+    of one thread: a shard steps its envs exactly as the whole batch would.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": [], "render_fps": 20}
 
-    def __init__(self, num_envs: int = 1, max_episode_steps: int = DEFAULT_MAX_EPISODE_STEPS, **settings) -> None:
+    def __init__(self, num_envs: int = 1, max_episode_steps: int = DEFAULT_MAX_EPISODE_STEPS, num_threads: int = 1,
+                 **settings) -> None:
         if not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= 100_000:
             raise ValueError(f"num_envs = {num_envs!r} is outside the allowed range [1, 100000]")
         if not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1:
             raise ValueError(f"max_episode_steps = {max_episode_steps!r} must be a positive integer")
+        if not isinstance(num_threads, (int, np.integer)) or not 1 <= num_threads <= min(num_envs, 256):
+            raise ValueError(f"num_threads = {num_threads!r} is outside the allowed range [1, {min(num_envs, 256)}] "
+                             f"(at most one thread per env)")
         self.task = GraspTask(**settings)
         self.num_envs = int(num_envs)
+        self.num_threads = int(num_threads)
         self.max_episode_steps = int(max_episode_steps)
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.task.control_dt}
         self.single_action_space = spaces.Box(-1.0, 1.0, (self.task.gripper.n_fingers,), np.float32)
@@ -278,10 +289,29 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
         self.single_observation_space = spaces.Box(self._low, self._high, dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self._batch = GraspBatch(self.task, self.num_envs)
-        self._rngs: list[np.random.Generator] = []
-        self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._autoreset = np.zeros(self.num_envs, dtype=bool)
+        bounds = np.linspace(0, self.num_envs, self.num_threads + 1).round().astype(int)
+        self._shards = [_Shard(self.task, hi - lo, self.max_episode_steps, self._low, self._high)
+                        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
+        self._starts = bounds[:-1]
+        self._pool = None
+        if self.num_threads > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(self.num_threads, thread_name_prefix="soft-gripper-shard")
+
+    @property
+    def _batch(self) -> GraspBatch:
+        """The batch of a one-thread vector (the shards' batches are each shard's)."""
+        if len(self._shards) != 1:
+            raise AttributeError("a vector of several threads has one GraspBatch per shard: see _shards")
+        return self._shards[0].batch
+
+    def _map(self, method: str, *per_shard):
+        """Calls ``method`` of every shard with its share of ``per_shard`` arguments, on the threads if several."""
+        calls = [(getattr(shard, method), [args[k] for args in per_shard]) for k, shard in enumerate(self._shards)]
+        if self._pool is None:
+            return [call(*args) for call, args in calls]
+        return list(self._pool.map(lambda item: item[0](*item[1]), calls))
 
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
         if seed is None or isinstance(seed, (int, np.integer)):
@@ -293,46 +323,94 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
         options = check_options(options)
         if options.get("scene") == "paper":
             raise ValueError("reset option scene = 'paper' is for the single env (gym.make), not a vector")
-        if seed is not None or not self._rngs:
-            self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        self._reset_envs(np.arange(self.num_envs), options)
-        self._autoreset[:] = False
-        infos = _infos(self._batch, _zero_terms(self.num_envs), np.zeros(self.num_envs, dtype=bool))
-        return _observations(self._batch, self._low, self._high), _masked(infos)
-
-    def _reset_envs(self, indices: np.ndarray, options: dict) -> None:
-        scenes = [task_scene(self.task, self._rngs[i], options) for i in indices]
-        self._batch.reset(indices, scenes, "task")
-        self._steps[indices] = 0
+        reseed = seed is not None
+        parts = self._map("reset", self._split(seeds), [reseed] * len(self._shards), [options] * len(self._shards))
+        observations, infos = _joined(parts)
+        return observations, _masked(infos)
 
     def reset_done(self) -> np.ndarray:
         """Resets now every env whose episode ended at the last step, instead of at the next one, and returns the
         observations of all envs: the same-step autoreset that Stable-Baselines3's VecEnv expects."""
-        done = np.nonzero(self._autoreset)[0]
-        if len(done):
-            self._reset_envs(done, {})
-            self._autoreset[done] = False
-        return _observations(self._batch, self._low, self._high)
+        return _joined([(observations,) for observations in self._map("reset_done")])[0]
 
     def step(self, actions):
-        if self._batch.sim is None:
+        if self._shards[0].batch.sim is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         actions = _check_actions(actions, (self.num_envs,) + self.single_action_space.shape)
-        active = ~self._autoreset
-        outcome = self._batch.step(actions, active)
-        self._steps[active] += 1
+        observations, reward, terminated, truncated, infos = _joined(self._map("step", self._split(actions)))
+        return observations, reward, terminated, truncated, _masked(infos)
+
+    def _split(self, values):
+        """``values`` (one per env) cut into the shards' shares."""
+        ends = list(self._starts[1:]) + [self.num_envs]
+        return [values[lo:hi] for lo, hi in zip(self._starts, ends, strict=True)]
+
+    def close_extras(self, **kwargs) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+
+class _Shard:
+    """Consecutive envs of a vector in one batched simulator: their episodes, seeds, step counts and autoresets."""
+
+    def __init__(self, task: GraspTask, size: int, max_episode_steps: int, low: np.ndarray, high: np.ndarray) -> None:
+        self.task, self.size, self.max_episode_steps = task, size, max_episode_steps
+        self.low, self.high = low, high
+        self.batch = GraspBatch(task, size)
+        self.rngs: list[np.random.Generator] = []
+        self.steps = np.zeros(size, dtype=np.int64)
+        self.autoreset = np.zeros(size, dtype=bool)
+
+    def reset(self, seeds: list[int | None], reseed: bool, options: dict):
+        if reseed or not self.rngs:
+            self.rngs = [seeding.np_random(s)[0] for s in seeds]
+        self._reset_envs(np.arange(self.size), options)
+        self.autoreset[:] = False
+        infos = _infos(self.batch, _zero_terms(self.size), np.zeros(self.size, dtype=bool))
+        return _observations(self.batch, self.low, self.high), infos
+
+    def _reset_envs(self, indices: np.ndarray, options: dict) -> None:
+        scenes = [task_scene(self.task, self.rngs[i], options) for i in indices]
+        self.batch.reset(indices, scenes, "task")
+        self.steps[indices] = 0
+
+    def reset_done(self) -> np.ndarray:
+        done = np.nonzero(self.autoreset)[0]
+        if len(done):
+            self._reset_envs(done, {})
+            self.autoreset[done] = False
+        return _observations(self.batch, self.low, self.high)
+
+    def step(self, actions: np.ndarray):
+        active = ~self.autoreset
+        outcome = self.batch.step(actions, active)
+        self.steps[active] += 1
         terminated = outcome.terminated.copy()
-        truncated = active & (outcome.solver_failure | (self._steps >= self.max_episode_steps))
+        truncated = active & (outcome.solver_failure | (self.steps >= self.max_episode_steps))
         reward = outcome.reward.copy()
         terms = outcome.reward_terms
-        restarting = np.nonzero(self._autoreset)[0]
+        restarting = np.nonzero(self.autoreset)[0]
         if len(restarting):
             self._reset_envs(restarting, {})
             reward[restarting] = 0.0
             terms = {name: np.where(active, value, 0.0) for name, value in terms.items()}
-        infos = _infos(self._batch, terms, outcome.solver_failure)
-        self._autoreset = terminated | truncated
-        return (_observations(self._batch, self._low, self._high), reward, terminated, truncated, _masked(infos))
+        infos = _infos(self.batch, terms, outcome.solver_failure)
+        self.autoreset = terminated | truncated
+        return _observations(self.batch, self.low, self.high), reward, terminated, truncated, infos
+
+
+def _joined(parts: list[tuple]) -> tuple:
+    """The shards' results (tuples of arrays and dicts of them) joined along the envs, or the one shard's as is."""
+    if len(parts) == 1:
+        return parts[0]
+    return tuple(_join([part[k] for part in parts]) for k in range(len(parts[0])))
+
+
+def _join(values: list):
+    if isinstance(values[0], dict):
+        return {key: _join([value[key] for value in values]) for key in values[0]}
+    return np.concatenate(values)
 
 
 def _masked(infos: dict[str, Any]) -> dict[str, Any]:

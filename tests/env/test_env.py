@@ -145,12 +145,14 @@ def test_paper_scene_with_the_scripted_ramp_reproduces_the_core_simulator():
     assert obs[layout["normal_forces"]].sum() > 0.1  # it touched the ball
 
 
-def test_vector_env_matches_single_envs_including_autoreset():
-    """make_vec (one batched simulator) against Gymnasium's SyncVectorEnv of single envs, same seeds and actions,
-    with episodes short enough that every env autoresets twice."""
+@pytest.mark.parametrize("num_threads", [1, 2])
+def test_vector_env_matches_single_envs_including_autoreset(num_threads):
+    """make_vec (one batched simulator, or two shards on two threads) against Gymnasium's SyncVectorEnv of single
+    envs, same seeds and actions, with episodes short enough that every env autoresets twice."""
     n, steps = 3, 10
-    vector = gym.make_vec(ENV_ID, num_envs=n, max_episode_steps=4)
+    vector = gym.make_vec(ENV_ID, num_envs=n, max_episode_steps=4, num_threads=num_threads)
     assert isinstance(vector.unwrapped, SoftGripperUnderwaterVectorEnv)
+    assert len(vector.unwrapped._shards) == num_threads
     reference = gym.vector.SyncVectorEnv([lambda: gym.make(ENV_ID, max_episode_steps=4) for _ in range(n)])
     actions = np.random.default_rng(1).uniform(-1, 1, (steps, n, 3))
     obs, info = vector.reset(seed=11)
@@ -168,6 +170,40 @@ def test_vector_env_matches_single_envs_including_autoreset():
         np.testing.assert_array_equal(info["is_success"], ref_info["is_success"])
         np.testing.assert_allclose(info["reward_terms"]["contact"], ref_info["reward_terms"]["contact"], atol=1e-9)
     assert np.all(ended >= 2)  # every env ended twice, so both autoresets were compared
+    vector.close()
+
+
+def test_threads_give_the_one_thread_results_bitwise():
+    """Shards on threads step each env exactly as one batch does, autoresets and infos included."""
+    runs = []
+    for num_threads in (1, 2, 5):
+        vector = gym.make_vec(ENV_ID, num_envs=5, max_episode_steps=3, num_threads=num_threads, model="planar")
+        actions = np.random.default_rng(4).uniform(-1, 1, (7, 5, 3))
+        outputs = [vector.reset(seed=21)[0]]
+        for action in actions:
+            obs, reward, terminated, truncated, info = vector.step(action)
+            outputs += [obs, reward, terminated, truncated, info["finger_forces_N"], info["reward_terms"]["reach"],
+                        info["_is_success"]]
+        outputs.append(vector.unwrapped.reset_done())
+        vector.close()
+        runs.append(outputs)
+    for other in runs[1:]:
+        assert all(np.array_equal(a, b) for a, b in zip(runs[0], other, strict=True))
+
+
+def test_gymnasium_async_vector_env_matches_the_sync_one():
+    """The single env works in Gymnasium's AsyncVectorEnv (one process per env): same results as SyncVectorEnv."""
+    make = [lambda: gym.make(ENV_ID, model="planar", max_episode_steps=3) for _ in range(2)]
+    actions = np.random.default_rng(2).uniform(-1, 1, (4, 2, 3)).astype(np.float32)
+    results = []
+    for vector in (gym.vector.AsyncVectorEnv(make), gym.vector.SyncVectorEnv(make)):
+        outputs = [vector.reset(seed=5)[0]]
+        for action in actions:
+            obs, reward, terminated, truncated, _ = vector.step(action)
+            outputs += [obs, reward, terminated, truncated]
+        vector.close()
+        results.append(outputs)
+    assert all(np.array_equal(a, b) for a, b in zip(*results, strict=True))
 
 
 def test_solver_failure_truncates_and_keeps_the_last_good_state(env, monkeypatch):
@@ -279,6 +315,10 @@ def test_vector_env_bad_input_and_step_before_reset():
         vector.step(np.zeros(3))
     with pytest.raises(ValueError, match=r"scene = 'paper' is for the single env"):
         vector.reset(options={"scene": "paper"})
+    with pytest.raises(ValueError, match=r"num_threads = 3 is outside the allowed range \[1, 2\]"):
+        SoftGripperUnderwaterVectorEnv(num_envs=2, num_threads=3)
+    with pytest.raises(ValueError, match=r"num_threads = 0 is outside the allowed range"):
+        SoftGripperUnderwaterVectorEnv(num_envs=2, num_threads=0)
     with pytest.raises(ValueError, match=r"num_envs = 0 is outside the allowed range"):
         SoftGripperUnderwaterVectorEnv(num_envs=0)
     with pytest.raises(gym.error.ResetNeeded):

@@ -67,7 +67,7 @@ N_DESIGN_FIELDS = 6
 """The fields of :class:`RodArrays` that a design fixes, which come before a state's frames."""
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def named_rods(rods):
     """:class:`RodArrays` from its fields as plain tuples (:func:`~..solvers.newton.plain`), named again, the
     finger contact's too."""
@@ -92,7 +92,7 @@ class StepInputs(NamedTuple):
     int (:func:`~.finger_contact.find_near_fingers`); empty without finger contact."""
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def external_forces_rod(positions, start_positions, velocities, accelerations, water, terms, velocity_derivative,
                         acceleration_derivative, stride, force, band):
     """Adds the force terms' force [N] to one rod's ``force`` (N, ≥D) and their negated Jacobian to its ``band``.
@@ -112,7 +112,7 @@ def external_forces_rod(positions, start_positions, velocities, accelerations, w
         added_mass(start_positions, accelerations, edge_added_mass, acceleration_derivative, stride, force, band)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def external_forces(positions, start_positions, velocities, accelerations, water, terms, velocity_derivative,
                     acceleration_derivative, stride, force, band):
     """:func:`external_forces_rod` for every rod: arrays (R, N, D), ``water`` (R, D), ``band`` (R, n, kd+1)."""
@@ -151,7 +151,7 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, velocity, accele
     return energy
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def assemble(q, step, rods, terms, hessian, force, band):
     """Every rod's force (R, N, S) [N] and −∂f/∂q (R, n, kd+1), written into ``force`` and ``band``."""
     dim = step.water.shape[1]

@@ -67,7 +67,7 @@ def object_in_rod_frames(obj: GraspedObject, finger_directions: np.ndarray, fing
     return centers, centers, radius
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def normal_reactions(positions, reactions, starts, ends):
     """The component of each node's reaction (R, N, D) [N] along the outward normal of its rod's object there (the
     direction from the nearest point of the segment ``starts``–``ends`` (R, D) to the node (R, N, D)), (R, N)."""
@@ -84,7 +84,7 @@ def normal_reactions(positions, reactions, starts, ends):
     return normal
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def within_reach(starts, ends, radii, length):
     """Which rods (R,) can touch an object given as they see it (segment ends (R, D), touching distances (R, N)):
     the object must exist in the rod's frame (some distance > 0) and its segment lie within ``length`` plus the
@@ -99,7 +99,7 @@ def within_reach(starts, ends, radii, length):
     return reach
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def distance_to_segment(point, start, end, nearest):
     """Distance from ``point`` to the segment start–end; writes the segment's nearest point into ``nearest``."""
     dim = point.size
@@ -116,7 +116,7 @@ def distance_to_segment(point, start, end, nearest):
     return math.sqrt(distance2)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def find_penetrations(positions, old_positions, view, held, first_free_node, tolerance, new_hold, hold_at):
     """Marks in ``new_hold`` (R, N) every free node from ``first_free_node`` on of a searched rod that lies inside its
     object (``view``, :class:`ObjectView`: for node i of rod r, the points within ``radii[r, i]`` of the segment
@@ -166,7 +166,7 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
     return found
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def onto_surface(point, start, end, radius, normal):
     """Moves ``point`` (D,) in place along the normal to the surface at ``radius`` from the segment start–end, and
     writes that outward unit normal into ``normal`` (D,); returns False (and leaves both) where the point lies on
@@ -181,7 +181,7 @@ def onto_surface(point, start, end, radius, normal):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def tangent_basis(normal, basis):
     """An orthonormal basis (D, D) whose first column is the unit ``normal`` (D,) and whose others span its tangent
     plane, into ``basis``; the same normal always gives the same basis."""
@@ -209,7 +209,7 @@ def tangent_basis(normal, basis):
     basis[2, 2] = normal[0] * basis[1, 1] - normal[1] * basis[0, 1]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def rotate_node(band, first, basis):
     """Expresses one node's D DOFs ``first`` … ``first`` + D − 1 of a rod's symmetric band (n, kd+1) in the
     ``basis`` (D, D) (x = Q·ξ): A ← Tᵀ·A·T with T the identity but for Q on that node's block, in place."""

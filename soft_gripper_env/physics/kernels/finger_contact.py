@@ -102,7 +102,7 @@ class FingerContact(NamedTuple):
         return cls(stiffness, float(friction), disc.node_radius.copy(), eligible, np.ascontiguousarray(axes))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _world(q_node, axes, out):
     """A node's world position (3,) [m] from its coordinates ``q_node`` (≥ D,) on a finger with ``axes`` (D, 3)."""
     for k in range(3):
@@ -111,7 +111,7 @@ def _world(q_node, axes, out):
             out[k] += q_node[d] * axes[d, k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _nearest_on_finger(point, finger, eligible, first_edge, last_edge, nearest):
     """The nearest point of a finger's centre line, world nodes ``finger`` (N, 3), on its ``eligible`` (N − 1,)
     edges from ``first_edge`` to ``last_edge``: returns (distance [m], edge, t) and writes the point to ``nearest``
@@ -133,7 +133,7 @@ def _nearest_on_finger(point, finger, eligible, first_edge, last_edge, nearest):
     return best, best_edge, best_t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _onto_tangent_plane(vector, normal):
     """Removes from ``vector`` (3,) its part along the unit ``normal`` (3,)."""
     along = vector[0] * normal[0] + vector[1] * normal[1] + vector[2] * normal[2]
@@ -141,14 +141,14 @@ def _onto_tangent_plane(vector, normal):
         vector[k] -= along * normal[k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _finger_world(q_rod, axes, out):
     """A finger's world node positions (N, 3) [m] from its coordinates (N, ≥D)."""
     for i in range(q_rod.shape[0]):
         _world(q_rod[i], axes, out[i])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def find_near_fingers(q_old, q_pred, contact, near):
     """:func:`near_fingers_of_gripper` for every gripper."""
     if contact.stiffness == 0.0:
@@ -158,7 +158,7 @@ def find_near_fingers(q_old, q_pred, contact, near):
         near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near):
     """For the gripper whose rods start at ``first_rod``: the nearest eligible edge of each other finger o to each
     node i of each rod r at the start of the step, into ``near[r, i, o]`` where the node is within the reach plus
@@ -224,7 +224,7 @@ def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near):
                     near[first_rod + f, i, o] = best_edge
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, band):
     """Adds the other fingers' contact force on rod r's nodes [N] to ``force`` (N, S), in the rod's coordinates, and
     its Newton matrix to ``band`` (n, kd+1) (when ``hessian``), for the step of ``dt`` [s] from ``q_old`` with

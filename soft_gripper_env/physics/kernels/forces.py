@@ -32,7 +32,7 @@ def rod_water_velocity(disc: Discretization, water_velocity: np.ndarray) -> np.n
     return rods.reshape(-1, 2)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def linear_damping(coefficient, velocities, velocity_derivative, stride, force, band):
     """Adds −c_i·v_i to one rod's ``force`` (N, D) and c_i·∂v/∂q to the position diagonal of its ``band``
     (n, kd+1)."""
@@ -45,7 +45,7 @@ def linear_damping(coefficient, velocities, velocity_derivative, stride, force, 
             band[stride * i + k, kd] += c * velocity_derivative
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _add_edge_block(band_r, stride, i, dim, block, scale):
     """Add scale·[[B, B], [B, B]] over the position DOFs of nodes i and i+1 to one rod's band (lower part)."""
     kd = band_r.shape[1] - 1
@@ -62,7 +62,7 @@ def _add_edge_block(band_r, stride, i, dim, block, scale):
             band_r[row_j, kd - row_j + col_i] += value
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _edge_tangent(positions, e, t):
     """Writes the unit tangent of edge e of one rod (positions (N, D)) into ``t`` (D,)."""
     length2 = 0.0
@@ -74,7 +74,7 @@ def _edge_tangent(positions, e, t):
         t[k] *= inverse_length
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def morison_drag(positions, velocities, current, normal, tangential, velocity_derivative, stride, force, band):
     """Morison drag of every edge of one rod: adds the force to ``force`` (N, D) and its velocity Jacobian to
     ``band`` (n, kd+1).
@@ -115,7 +115,7 @@ def morison_drag(positions, velocities, current, normal, tangential, velocity_de
         _add_edge_block(band, stride, e, dim, block, 0.25 * velocity_derivative)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def added_mass(start_positions, accelerations, edge_mass, acceleration_derivative, stride, force, band):
     """Added-mass force −Σ ½·m_a·(I − t tᵀ)·a_node of every edge of one rod, with tangents at the start of the
     step; adds the force to ``force`` (N, D) and ½·m_a·(I − t tᵀ)·∂a/∂q on the node blocks of ``band``."""

@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def scatter_contiguous(band, offset, hessian, m):
     """Add the symmetric m×m ``hessian`` of DOFs offset … offset+m−1 into one rod's band (n, kd+1)."""
     kd = band.shape[1] - 1
@@ -22,7 +22,7 @@ def scatter_contiguous(band, offset, hessian, m):
             row[kd - a + b] += hessian[a, b]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def factor_banded_symmetric(a, free, row_scratch):
     """Factor one rod's band (n, kd+1) in place as L·D·Lᵀ; returns False at a zero or non-finite pivot.
     ``row_scratch`` (kd+1,) is work space.
@@ -60,7 +60,7 @@ def factor_banded_symmetric(a, free, row_scratch):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def solve_factored(a, x, free):
     """Solve with a band factored by :func:`factor_banded_symmetric`, in place on ``x`` (n,); fixed DOFs get 0."""
     n, kd1 = a.shape
@@ -83,7 +83,7 @@ def solve_factored(a, x, free):
             x[k] -= row[kd - i + k] * xi
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def solve_banded_symmetric_rod(a, x, free):
     """Solve A·x = b for one rod in place: ``x`` holds b on entry and the solution on return; ``a`` (n, kd+1) is
     overwritten by its factors. Returns False if a pivot was zero or not finite (``x`` is then NaN)."""

@@ -38,33 +38,33 @@ from .linalg import scatter_contiguous
 # 3-vectors are tuples: value types that Numba keeps in registers, so the kernel allocates nothing per node.
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _axpy(alpha, a, beta, b):
     """alpha·a + beta·b."""
     return (alpha * a[0] + beta * b[0], alpha * a[1] + beta * b[1], alpha * a[2] + beta * b[2])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _scale(alpha, a):
     return (alpha * a[0], alpha * a[1], alpha * a[2])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _row(array, i):
     return (array[i, 0], array[i, 1], array[i, 2])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _parallel_transport(u, t1, t2):
     """Transport vector u from tangent t1 to tangent t2 (rotation about t1 × t2)."""
     b = _cross(t1, t2)
@@ -77,21 +77,21 @@ def _parallel_transport(u, t1, t2):
     return _axpy(_dot(u, t1), t2, 1.0, _axpy(_dot(u, n1), n2, _dot(u, b), b))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _rotate(v, axis, angle):
     c = math.cos(angle)
     s = math.sin(angle)
     return _axpy(c, v, 1.0, _axpy(s, _cross(axis, v), _dot(axis, v) * (1.0 - c), axis))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _signed_angle(u, v, axis):
     w = _cross(u, v)
     angle = math.atan2(math.sqrt(_dot(w, w)), _dot(u, v))
     return -angle if _dot(axis, w) < 0.0 else angle
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def rod_frames(qr, tangent_old, director_old, ref_twist_old, tangent, director1, ref_twist, m1, m2, lengths):
     """Frames of one rod at coordinates ``qr`` (N, 4), transported from the start-of-step frame.
 
@@ -124,7 +124,7 @@ def rod_frames(qr, tangent_old, director_old, ref_twist_old, tangent, director1,
         ref_twist[i] = ref_twist_old[i] + _signed_angle(u, _row(director1, i), t)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, grad, hess, vectors, blocks,
                 accumulate_hessian):
     """Bending and twisting energy at one interior node; writes its gradient (11,) and Hessian (11, 11) over
@@ -237,7 +237,7 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, gr
     return energy
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _cross_matrix_entry(a, i, j):
     """Entry (i, j) of the matrix [a]× with [a]×·b = a × b."""
     if i == j:
@@ -247,7 +247,7 @@ def _cross_matrix_entry(a, i, j):
     return -sign * a[k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
                       twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian):
     """Elastic energy of one rod [J]; adds −∇E to ``force`` (N, 4) and ∇²E to ``band`` (4N, 11).
@@ -305,7 +305,7 @@ def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, 
     return energy
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
                   twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian):
     """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 4) and ∇²E to ``band`` (R, 4N, 11).
@@ -320,7 +320,7 @@ def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stre
     return energy
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def rod3d_update_frames(q, tangent_old, director_old, ref_twist_old, tangent, director, ref_twist):
     """Frames at the end of a step: writes ``tangent``, ``director`` (R, N − 1, 3) and ``ref_twist`` (R, N)."""
     n_rods, n_nodes = q.shape[0], q.shape[1]

@@ -130,7 +130,7 @@ def _bend(q, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accumula
     return energy
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def planar_elastic_rod(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_length, natural_curvature, force,
                        band, accumulate_hessian):
     """Elastic energy of one rod [J]; adds −∇E to ``force`` (N, 2) and ∇²E to ``band`` (2N, 6).
@@ -146,7 +146,7 @@ def planar_elastic_rod(q, rest_length, stretch_stiffness, bend_stiffness, vorono
     return energy
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def planar_elastic(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_length, natural_curvature,
                    force, band, accumulate_hessian):
     """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 2) and ∇²E to ``band`` (R, 2N, 6).

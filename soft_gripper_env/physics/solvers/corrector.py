@@ -83,7 +83,7 @@ class ContactChanges(NamedTuple):
     """Rods with any of these, (R,) bool."""
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result):
     """The predictor–corrector for every gripper of a batch (see the module notes).
 
@@ -157,7 +157,7 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
         _body_frame_offsets(np.zeros_like(held), sliding, positions, holds, moving[1], n_fingers)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _hold_in_place(positions, held, sliding, hold_at, solve):
     """Puts the stuck nodes of the rods to be solved on their hold points (a fixed object's holds)."""
     for r in range(positions.shape[0]):
@@ -169,7 +169,7 @@ def _hold_in_place(positions, held, sliding, hold_at, solve):
                     positions[r, i, d] = hold_at[r, i, d]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shift):
     """After a solve with free bodies: their orientation at the solution, the object as each rod sees it there, and
     its displacement over the step in each rod's coordinates (``shift`` (R, D))."""
@@ -187,7 +187,7 @@ def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shi
                 + projection[r, d, 1] * (c[b, 1] - c_old[b, 1]) + projection[r, d, 2] * (c[b, 2] - c_old[b, 2])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _anchors(holds, motion, n_fingers, anchors):
     """Where each held node of a free body's rods stuck last, P·(c + R·r_h) at the body's pose after the last solve,
     into ``anchors`` (R, N, D), which it returns."""
@@ -208,7 +208,7 @@ def _anchors(holds, motion, n_fingers, anchors):
     return anchors
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _body_frame_offsets(new_hold, stuck_again, hold_at, holds, motion, n_fingers):
     """The offset of each new hold, and each sliding node that sticks again, in its body's frame at the end of the
     last solve [m], into ``holds.offsets``."""
@@ -234,7 +234,7 @@ FRICTION_TOLERANCE = 5e-3
 fraction since the solve (plus Newton's force tolerance)."""
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def contact_changes(positions, old_positions, anchors, residual, holds, view, friction, solver, within_budget,
                     changes):
     """The corrector's test after a solve, for rods whose nodes are at ``positions`` (R, N, D) and whose residual
@@ -336,7 +336,7 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
                 changed[r] = True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def corrector_continues(within_budget, new_hold, changed, again):
     """The corrector's decision after a test: whether to solve again, and which rods (``again`` (R,)). Within the
     budget, every rod that changed. Once the budget is spent, only while nodes are inside the object, and only
@@ -350,7 +350,7 @@ def corrector_continues(within_budget, new_hold, changed, again):
     return again.any()
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def update_holds(within_budget, holds, changes):
     """The holds of the next solve, in place (:class:`ContactChanges`): new penetrations held (stuck), within the
     budget adhesive holds released, and every hold stuck or sliding as the test found, with its friction."""
@@ -363,7 +363,7 @@ def update_holds(within_budget, holds, changes):
                 holds.friction[r, i, d] = changes.friction[r, i, d] if sliding[r, i] else 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def contact_masks(clamp_free, held, sliding, dim, free, measured):
     """The DOFs Newton solves for, ``free`` (R, n), and those its test measures as they are, ``measured`` (R, n),
     from the clamp's ``clamp_free`` (R, n) and the contacts (R, N): a stuck node's position DOFs are fixed (it moves

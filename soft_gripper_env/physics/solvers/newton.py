@@ -132,7 +132,7 @@ MAX_STEP_HALVINGS = 6
 
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_block, body_rhs, factored, scratch):
     """Eliminates each rod's free DOFs from the coupled Newton system.
 
@@ -251,7 +251,7 @@ class _NewtonWork(NamedTuple):
     last_ratio: np.ndarray
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _new_work(q, dim, n_fingers, coupled, contact, fingers):
     """The work arrays; those only a body's solve (``coupled``), a contact's (``contact``) or the line search of
     fingers touching each other (``fingers``) uses are empty, and shared, otherwise: every allocation counts in the
@@ -411,7 +411,7 @@ def _rod_system(r, q, step, rods, terms, solver, measured, holds, coupling, resi
     return own, largest
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _back_off_rod(r, q, rod_delta, fraction):
     """Takes ``fraction`` of rod r's last Newton step ``rod_delta`` (n,) back."""
     stride = q.shape[2]
@@ -420,7 +420,7 @@ def _back_off_rod(r, q, rod_delta, fraction):
             q[r, i, s] -= fraction * rod_delta[i * stride + s]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _place_held_nodes(b, r, q, holds, coupling, rod_coupling, normals, body_residual):
     """Puts rod r's stuck nodes on the free body, x = P·(c + R·r_h), and its sliding nodes onto the body's surface
     at their current point; writes S = P·[I, −[a]×], the motion of each held DOF per unit body motion, into
@@ -498,7 +498,7 @@ def _place_held_nodes(b, r, q, holds, coupling, rod_coupling, normals, body_resi
             body_residual[k] += load  # the friction's reaction on the body: −(−f) on its point
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _along_surface(friction, normal, out):
     """The friction force ``friction`` (D,) turned into the tangent plane of ``normal`` (D,), keeping its size."""
     size = 0.0
@@ -515,7 +515,7 @@ def _along_surface(friction, normal, out):
         out[d] *= scale
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _slide_on_fixed_object(r, q, holds, normals):
     """Puts rod r's sliding nodes onto a fixed object's surface at their current point, their normals into
     ``normals`` (N, D)."""
@@ -525,7 +525,7 @@ def _slide_on_fixed_object(r, q, holds, normals):
             onto_surface(q[r, i, :dim], holds.starts[r], holds.ends[r], holds.radii[r, i], normals[i])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _slide_rows(r, holds, normals, residual, right_hand_side, band, tolerance_inverse, own, largest, basis):
     """Rod r's sliding nodes in Newton's system: their friction joins the residual (n,) and the right-hand side (n,),
     whose node blocks and the band (n, kd+1) are then turned into each node's surface frame (normal, tangents),
@@ -559,7 +559,7 @@ def _slide_rows(r, holds, normals, residual, right_hand_side, band, tolerance_in
     return own, largest
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _unrotate_steps(first_rod, holds, work):
     """Turns the Newton steps of every active rod's sliding nodes, x0 and X (work), from their surface frames back
     into the rod's coordinates."""
@@ -617,7 +617,7 @@ def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_si
     return own, largest
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _load_body(right_hand_side, coupling, body_residual):
     """Adds a touching rod's reactions, its residual on held DOFs (the negated Newton right-hand side (n,), in the
     frames the DOFs are solved in) moved by ``coupling`` (n, 6), to the body's residual (6,)."""
@@ -626,7 +626,7 @@ def _load_body(right_hand_side, coupling, body_residual):
             body_residual[k] -= coupling[j, k] * right_hand_side[j]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _body_residual_in_basis(basis, body_tolerance, own, total, largest):
     """The body's residual ``own`` (6,) in its admissible motions, Bᵀ·own, into ``total``; returns ``largest``
     updated with its scaled entries."""
@@ -660,7 +660,7 @@ def _rods_continue(first, it, max_iterations, result, work):
     return going
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _body_step(b, basis, work):
     """The body's Newton step (6,) into ``work.body_step``, from the reduced system Bᵀ·A·B δ = −Bᵀ·G + Bᵀ·Σ rhs
     (A the body's matrix plus the rods' Schur complements; unused columns of B get the identity). Returns False,
@@ -728,7 +728,7 @@ def _apply_step(b, first, q, coupling, work):
             coupling.motion.rotation[b, k] += work.body_step[3 + k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _back_off(b, first, q, motion, work, fraction):
     """Takes ``fraction`` of the last Newton step back, rods and body (the line search of a free body's solve)."""
     for f in range(work.active.size):
@@ -738,7 +738,7 @@ def _back_off(b, first, q, motion, work, fraction):
         motion.rotation[b, k] -= fraction * work.body_step[3 + k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _finish_gripper(first, n_fingers, converged, iterations, ratio, result):
     """Gives every rod of a gripper solved with its body the gripper's outcome."""
     for r in range(first, first + n_fingers):
@@ -747,7 +747,7 @@ def _finish_gripper(first, n_fingers, converged, iterations, ratio, result):
         result.ratio[r] = ratio
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water, dt, rods, terms, solver, midpoint,
                  q, velocity, acceleration):
     """A whole backward-Euler step of rods that move on their own, in one call (the hot path of a scene without
@@ -782,7 +782,7 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
     return per_gripper(result.converged, result.iterations, result.ratio, solver.n_fingers)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def predict(q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
     """The predictor q_pred = q_old + Δt·v_old of every rod, and Newton's start q_pred + Δt²·a_old, the last step's
     motion extrapolated (``acceleration_old`` empty: the predictor itself). Arrays (R, N, S)."""
@@ -799,7 +799,7 @@ def _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
             q_start[r, i, k] = q_pred[r, i, k] + (dt * dt * acceleration_old[r, i, k] if extrapolate else 0.0)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def finish(q, q_old, velocity_old, dt, velocity, acceleration):
     """The end of a backward-Euler step of every rod: v = (q − q_old)/Δt and the mean acceleration (v − v_old)/Δt."""
     for r in range(q.shape[0]):
@@ -814,7 +814,7 @@ def _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration):
             acceleration[r, i, k] = (velocity[r, i, k] - velocity_old[r, i, k]) / dt
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def midpoint_end(q_old, velocity_old, q, velocity):
     """The implicit midpoint rule's end from its backward-Euler half step (see :mod:`.integrators`), in place:
     q₁ = 2·q_½ − q₀, v₁ = 2·v_½ − v₀. Arrays (R, N, S)."""
@@ -830,7 +830,7 @@ def _midpoint_end_rod(r, q_old, velocity_old, q, velocity):
             velocity[r, i, k] = 2.0 * velocity[r, i, k] - velocity_old[r, i, k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def per_gripper(converged, iterations, ratio, n_fingers):
     """A step's per-rod Newton results (R,) per gripper (B,): whether every finger converged, the most iterations,
     and the largest residual ratio (NaN read as inf)."""
