@@ -28,8 +28,9 @@ meet the issue's goals. ``--quick`` runs the cantilever scenes on a smaller grid
 the ramp and the reactive controller, once per speed setting in :data:`OUTCOME_SETTINGS` and once with the fine
 reference (3-D, N = 20, Δt = 2.5e-3 s, Newton tolerance 1e-9). For each setting it reports how often the success
 label agrees with the reference's, seed by seed, how far apart the two leave the object (median and 90th
-percentile), and the setting's speed in env steps per second (its own episodes' wall time, ``--workers`` settings
-at a time, so a ratio between settings, not an absolute). Writes DIR/grasp_outcomes.json and DIR/grasp_outcomes.png.
+percentile), and the setting's speed: one env under the reactive controller, timed alone after the episodes,
+against Gymnasium's ``Ant-v5`` in the same run. Writes DIR/grasp_outcomes.json and DIR/grasp_outcomes.png; each
+run's episodes are kept in DIR/grasp_outcome_runs/, so an interrupted study resumes.
 """
 
 from __future__ import annotations
@@ -283,42 +284,63 @@ def report_goals(rows) -> None:
 
 
 def grasp_outcomes(episodes: int, seed: int, workers: int, out: Path) -> dict:
-    """The grasp-outcome study (see the module's docstring); returns what it writes to grasp_outcomes.json."""
+    """The grasp-outcome study (see the module's docstring); returns what it writes to grasp_outcomes.json.
+
+    Each (setting, controller) run is kept in DIR/grasp_outcome_runs/ as it finishes, and a later call with the same
+    episodes and seed takes it from there: an interrupted study resumes where it stopped."""
     from concurrent.futures import ProcessPoolExecutor
 
     from benchmarks.contact_outcomes import POLICIES, agreement, run_pair
 
+    runs = out / "grasp_outcome_runs"
+    runs.mkdir(parents=True, exist_ok=True)
     jobs = [(label, policy) for label in OUTCOME_SETTINGS for policy in POLICIES]
     results = {}
-    with ProcessPoolExecutor(workers) as pool:
-        futures = {job: pool.submit(run_pair, OUTCOME_SETTINGS[job[0]]["model"], job[1], episodes, seed,
-                                    **{k: v for k, v in OUTCOME_SETTINGS[job[0]].items() if k != "model"})
-                   for job in jobs}
-        for job, future in tqdm(futures.items(), desc="grasp outcomes", unit="run", file=sys.stdout):
-            results[job] = future.result()
+    for job in jobs:
+        kept = _kept_run(runs, job, episodes, seed)
+        if kept is not None:
+            results[job] = kept
+    missing = [job for job in jobs if job not in results]
+    if missing:
+        print(f"{len(missing)} runs of {episodes} episodes to do ({len(jobs) - len(missing)} kept from an earlier "
+              f"call), {workers} at a time ...", flush=True)
+        with ProcessPoolExecutor(workers) as pool:
+            futures = {job: pool.submit(run_pair, OUTCOME_SETTINGS[job[0]]["model"], job[1], episodes, seed,
+                                        **_task_fields(job[0])) for job in missing}
+            for job, future in tqdm(futures.items(), desc="grasp outcomes", unit="run", file=sys.stdout):
+                results[job] = future.result()
+                (runs / _run_name(job)).write_text(json.dumps(results[job]))
+    print("timing each setting alone (one env, the reactive controller) against Ant-v5 ...", flush=True)
+    speeds = time_settings(seed)
     summary = {"episodes": episodes, "first_seed": seed, "reference": OUTCOME_REFERENCE, "default": OUTCOME_DEFAULT,
-               "goals": OUTCOME_GOALS, "settings": {}}
+               "goals": OUTCOME_GOALS, "ant_v5_steps_per_s": speeds.pop("ant_v5"), "settings": {}}
     print(f"\n{episodes} seeds from {seed} per controller; agreement with the reference "
           f"({', '.join(f'{k} = {v}' for k, v in _describe(OUTCOME_REFERENCE).items())})\n")
-    print("| setting | controller | success | labels agree | median gap [mm] | 90th pct [mm] | solver failures |"
-          " env steps/s |\n|---|---|---|---|---|---|---|---|")
+    print("| setting | controller | success | labels agree | median gap [mm] | 90th pct [mm] | median gap where the "
+          "reference holds [mm] | solver failures | env steps/s (× Ant-v5) |\n|---|---|---|---|---|---|---|---|---|")
     for label in OUTCOME_SETTINGS:
-        row = {"task": _describe(label), "controllers": {}}
+        speed = speeds[label]
+        row = {"task": _describe(label), "env_steps_per_s": speed,
+               "vs_ant_v5": speed / summary["ant_v5_steps_per_s"], "controllers": {}}
         for policy in POLICIES:
             result = results[(label, policy)]
-            agree = agreement(result, results[(OUTCOME_REFERENCE, policy)])
-            speed = result["mean_length"] * result["episodes"] / result["seconds"]
+            reference = results[(OUTCOME_REFERENCE, policy)]
+            agree = agreement(result, reference)
+            held = np.asarray(reference["successes"], dtype=bool)
+            gap = np.linalg.norm(np.subtract(result["final_object_positions"], reference["final_object_positions"]),
+                                 axis=1)
+            agree["median_position_gap_where_reference_holds_m"] = float(np.median(gap[held])) if held.any() else None
             row["controllers"][policy] = {**agree, "success_rate": result["success_rate"],
                                           "solver_failures": result["endings"]["solver_failure"],
-                                          "env_steps_per_s": speed, "successes": result["successes"],
+                                          "successes": result["successes"],
                                           "final_object_positions": result["final_object_positions"]}
             print(f"| {label} | {policy} | {result['success_rate']:.2f} | {agree['label_agreement']:.3f} |"
                   f" {1e3 * agree['median_position_gap_m']:.2f} | {1e3 * agree['p90_position_gap_m']:.1f} |"
-                  f" {result['endings']['solver_failure']} | {speed:.0f} |")
+                  f" {_millimetres(agree['median_position_gap_where_reference_holds_m'])} |"
+                  f" {result['endings']['solver_failure']} | {speed:.0f} ({row['vs_ant_v5']:.2f}×) |")
         controllers = row["controllers"].values()
         row["worst_label_agreement"] = min(c["label_agreement"] for c in controllers)
         row["worst_median_position_gap_m"] = max(c["median_position_gap_m"] for c in controllers)
-        row["env_steps_per_s"] = float(np.mean([c["env_steps_per_s"] for c in controllers]))
         row["meets_goals"] = bool(label == OUTCOME_REFERENCE or (
             row["worst_label_agreement"] >= OUTCOME_GOALS["label_agreement"]
             and row["worst_median_position_gap_m"] <= OUTCOME_GOALS["median_position_gap_m"]))
@@ -334,6 +356,57 @@ def grasp_outcomes(episodes: int, seed: int, workers: int, out: Path) -> dict:
     print(f"wrote {out / 'grasp_outcomes.json'}")
     plot_grasp_outcomes(summary, out / "grasp_outcomes.png")
     return summary
+
+
+def time_settings(seed: int, steps: int = 120, repeats: int = 3) -> dict:
+    """Env steps per second of every setting, one env under the reactive controller from seed ``seed`` for
+    ``steps`` actions (resetting as episodes end), the best of ``repeats``; and Ant-v5's, timed in the same run
+    (key ``"ant_v5"``)."""
+    import gymnasium as gym
+
+    import soft_gripper_env
+    from agents.scripted import ReactivePolicy
+    from benchmarks.env_speed import time_ant
+    from soft_gripper_env.grasp_task import GraspTask
+
+    def once(label: str) -> float:
+        env = gym.make(soft_gripper_env.ENV_ID, model=OUTCOME_SETTINGS[label]["model"], **_task_fields(label))
+        policy = ReactivePolicy(GraspTask(model=OUTCOME_SETTINGS[label]["model"], **_task_fields(label)))
+        obs, _ = env.reset(seed=seed)
+        start = time.perf_counter()
+        for _ in range(steps):
+            obs, _, terminated, truncated, _ = env.step(policy(obs))
+            if terminated or truncated:
+                obs, _ = env.reset()
+        return steps / (time.perf_counter() - start)
+
+    speeds = {"ant_v5": max(time_ant() for _ in range(repeats))}
+    for label in tqdm(OUTCOME_SETTINGS, desc="timing", unit="setting", file=sys.stdout):
+        once(label)  # compile or load the kernels
+        speeds[label] = max(once(label) for _ in range(repeats))
+    return speeds
+
+
+def _millimetres(metres: float | None) -> str:
+    return "—" if metres is None else f"{1e3 * metres:.2f}"
+
+
+def _task_fields(label: str) -> dict:
+    """A setting's GraspTask fields other than the model."""
+    return {key: value for key, value in OUTCOME_SETTINGS[label].items() if key != "model"}
+
+
+def _run_name(job: tuple[str, str]) -> str:
+    return "".join(c if c.isalnum() else "_" for c in f"{job[0]}__{job[1]}") + ".json"
+
+
+def _kept_run(runs: Path, job: tuple[str, str], episodes: int, seed: int) -> dict | None:
+    """An earlier call's run of ``job`` on the same seeds, if kept."""
+    path = runs / _run_name(job)
+    if not path.exists():
+        return None
+    kept = json.loads(path.read_text())
+    return kept if (kept.get("episodes"), kept.get("first_seed")) == (episodes, seed) else None
 
 
 def _describe(label: str) -> dict:
@@ -363,11 +436,11 @@ def plot_grasp_outcomes(summary: dict, path: Path) -> None:
             default = label == summary["default"]
             style = {"marker": marker, "color": f"C{k % 10}", "s": 90 if default else 40,
                      "edgecolor": "k" if default else "none", "label": f"{label}, {policy}"}
-            ax0.scatter(c["env_steps_per_s"], 1.0 - c["label_agreement"], **style)
-            ax1.scatter(c["env_steps_per_s"], 1e3 * c["median_position_gap_m"], **style)
+            ax0.scatter(row["vs_ant_v5"], 1.0 - c["label_agreement"], **style)
+            ax1.scatter(row["vs_ant_v5"], 1e3 * c["median_position_gap_m"], **style)
             if default and policy == next(iter(row["controllers"])):
                 for ax, y in ((ax0, 1.0 - c["label_agreement"]), (ax1, 1e3 * c["median_position_gap_m"])):
-                    ax.annotate("default", (c["env_steps_per_s"], y), xytext=(6, 6), textcoords="offset points",
+                    ax.annotate("default", (row["vs_ant_v5"], y), xytext=(6, 6), textcoords="offset points",
                                 fontsize=8)
     ax0.axhline(1.0 - goals["label_agreement"], color="k", ls="--", lw=1, label="goal (at most)")
     ax1.axhline(1e3 * goals["median_position_gap_m"], color="k", ls="--", lw=1, label="goal (at most)")
@@ -375,7 +448,8 @@ def plot_grasp_outcomes(summary: dict, path: Path) -> None:
     ax1.set_ylabel("median distance between final object positions [mm]")
     for ax in (ax0, ax1):
         ax.set_xscale("log")
-        ax.set_xlabel("env steps per second (one core, relative between settings)")
+        ax.set_xlabel(f"env steps per second, one env, as multiples of Ant-v5 "
+                      f"({summary['ant_v5_steps_per_s']:,.0f} steps/s in the same run)")
         ax.grid(True, which="both", alpha=0.3)
     ax1.legend(fontsize=6, ncol=2, loc="upper left")
     fig.suptitle(f"grasp outcomes against the fine reference (3-D, Δt = 2.5 ms, tolerance 1e-9), "
