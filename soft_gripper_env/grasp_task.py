@@ -327,17 +327,25 @@ class GraspBatch:
             ok = result.converged & _finite(result.state)
             failed |= running & ~ok
             keep = running & ok
-            index = np.nonzero(keep)[0]
-            if len(index) == self.batch_size:
+            contact = result.contact
+            if keep.all():  # the common case, without the masks
                 self.state = result.state
-            else:  # the batch's clock runs on for all
-                self.state = replace(put_grippers(self.state, index, take_grippers(result.state, index)),
-                                     time=result.state.time)
+                if contact is not None:
+                    impulse += np.maximum(contact.normal_reaction, 0.0) * task.physics_dt
+                    force_impulse += contact.reaction * task.physics_dt
+                iterations += result.newton_iterations
+                self.natural_curvature = np.clip(self.natural_curvature + rate * task.physics_dt, low, high)
+                self.time += task.physics_dt
+                continue
+            index = np.nonzero(keep)[0]
+            # the batch's clock runs on for all
+            self.state = replace(put_grippers(self.state, index, take_grippers(result.state, index)),
+                                 time=result.state.time)
             step = np.where(keep, task.physics_dt, 0.0)  # the time each episode advanced [s], (B,)
-            if result.contact is not None:  # a failed episode's reactions may be NaN: masked, not multiplied
-                impulse += np.where(keep[:, None, None], np.maximum(result.contact.normal_reaction, 0.0), 0.0) * \
+            if contact is not None:  # a failed episode's reactions may be NaN: masked, not multiplied
+                impulse += np.where(keep[:, None, None], np.maximum(contact.normal_reaction, 0.0), 0.0) * \
                     task.physics_dt
-                force_impulse += np.where(keep[:, None, None, None], result.contact.reaction, 0.0) * task.physics_dt
+                force_impulse += np.where(keep[:, None, None, None], contact.reaction, 0.0) * task.physics_dt
             iterations += np.where(keep, result.newton_iterations, 0)
             self.natural_curvature = np.clip(self.natural_curvature + rate * step[:, None], low, high)
             self.time += step
