@@ -127,8 +127,8 @@ def rod_frames(qr, tangent_old, director_old, ref_twist_old, tangent, director1,
 @njit(cache=True, nogil=True, error_model="numpy")
 def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, grad, hess, vectors, blocks,
                 accumulate_hessian):
-    """Bending and twisting energy at one interior node; writes its gradient (11,) and Hessian (11, 11) over
-    (x_{i−1}, θ_e, x_i, θ_f, x_{i+1}). ``eb`` = EI/l_i, ``gj`` = GJ/l_i. ``vectors`` (3, 11) and ``blocks``
+    """Bending and twisting energy at one interior node; writes its gradient (11,) and the lower triangle of its
+    Hessian (11, 11) over (x_{i−1}, θ_e, x_i, θ_f, x_{i+1}). ``eb`` = EI/l_i, ``gj`` = GJ/l_i. ``vectors`` (3, 11) and ``blocks``
     (3, 3, 3) are scratch space."""
     chi = 1.0 + _dot(te, tf)
     kb = _scale(2.0 / chi, _cross(te, tf))
@@ -231,8 +231,8 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, gr
     hess[3, 3] = c_the2
     hess[7, 7] = c_thf2
     hess[3, 7] = hess[7, 3] = 0.0
-    for a in range(11):
-        for b in range(11):
+    for a in range(11):  # the lower triangle, which is all the band reads (linalg.scatter_contiguous)
+        for b in range(a + 1):
             hess[a, b] += eb * (g1[a] * g1[b] + g2[a] * g2[b]) + gj * gt[a] * gt[b]
     return energy
 
