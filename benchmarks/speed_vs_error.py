@@ -76,12 +76,14 @@ OUTCOME_SETTINGS = {
     OUTCOME_REFERENCE: {"model": "3d", "physics_dt": 0.0025, "newton": NewtonSettings(relative_tolerance=1e-9)},
     "3d, dt 0.0025, tol 1e-6": {"model": "3d", "physics_dt": 0.0025},
     "3d, dt 0.005": {"model": "3d", "physics_dt": 0.005},
+    "3d, dt 0.005, tol 1e-4": {"model": "3d", "physics_dt": 0.005, "newton": NewtonSettings(relative_tolerance=1e-4)},
     OUTCOME_DEFAULT: {"model": "3d"},
     "3d, dt 0.01, tol 1e-4": {"model": "3d", "newton": NewtonSettings(relative_tolerance=1e-4)},
     "3d, dt 0.025": {"model": "3d", "physics_dt": 0.025},
     "3d, dt 0.05": {"model": "3d", "physics_dt": 0.05},
     "planar, dt 0.01": {"model": "planar"},
     "planar, dt 0.025": {"model": "planar", "physics_dt": 0.025},
+    "planar, dt 0.005": {"model": "planar", "physics_dt": 0.005},
 }
 """The grasp-outcome scene's settings (GraspTask fields), by label. N = 20 in all: the task's κ̄ is per node, so
 another node count would be another gripper. The second row is the reference at the default tolerance: how far
