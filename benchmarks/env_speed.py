@@ -167,7 +167,7 @@ def plot(results: dict, sizes: tuple[int, ...], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     ant = results["ant_v5_steps_per_s"]
-    fig, ax = plt.subplots(figsize=(7, 4.6))
+    fig, ax = plt.subplots(figsize=(9.5, 4.8))
     for model, suffix, color in (("planar", "", "C0"), ("3-D", "_3d", "C1")):
         ax.loglog(sizes, [results[f"vec{n}{suffix}_steps_per_s"] / ant for n in sizes], "o-", color=color,
                   label=f"make_vec, {model}, one thread")
@@ -185,7 +185,7 @@ def plot(results: dict, sizes: tuple[int, ...], path: Path) -> None:
     ax.set_ylabel("env steps per second, as multiples of Ant-v5")
     ax.set_title("SoftGripperUnderwater-v0 against Gymnasium's Ant-v5, one run")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     save_plot(fig, path)
     plt.close(fig)
 

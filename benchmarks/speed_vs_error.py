@@ -28,9 +28,10 @@ meet the issue's goals. ``--quick`` runs the cantilever scenes on a smaller grid
 the ramp and the reactive controller, once per speed setting in :data:`OUTCOME_SETTINGS` and once with the fine
 reference (3-D, N = 20, Δt = 2.5e-3 s, Newton tolerance 1e-9). For each setting it reports how often the success
 label agrees with the reference's, seed by seed, how far apart the two leave the object (median and 90th
-percentile), and the setting's speed: one env under the reactive controller, timed alone after the episodes,
-against Gymnasium's ``Ant-v5`` in the same run. Writes DIR/grasp_outcomes.json and DIR/grasp_outcomes.png; each
-run's episodes are kept in DIR/grasp_outcome_runs/, so an interrupted study resumes.
+percentile), and the setting's speed: one env under the reactive controller for four episodes from ``--seed``,
+timed alone after the episodes, against Gymnasium's ``Ant-v5`` in the same run. Writes DIR/grasp_outcomes.json
+and DIR/grasp_outcomes.png; each run's episodes are kept in DIR/grasp_outcome_runs/, so an interrupted study
+resumes.
 """
 
 from __future__ import annotations
@@ -322,11 +323,14 @@ def grasp_outcomes(episodes: int, seed: int, workers: int, out: Path) -> dict:
     print(f"\n{episodes} seeds from {seed} per controller; agreement with the reference "
           f"({', '.join(f'{k} = {v}' for k, v in _describe(OUTCOME_REFERENCE).items())})\n")
     print("| setting | controller | success | labels agree | median gap [mm] | 90th pct [mm] | median gap where the "
-          "reference holds [mm] | solver failures | env steps/s (× Ant-v5) |\n|---|---|---|---|---|---|---|---|---|")
+          "reference holds [mm] | solver failures | env steps/s grasping, random (× Ant-v5) |\n"
+          "|---|---|---|---|---|---|---|---|---|")
     for label in OUTCOME_SETTINGS:
-        speed = speeds[label]
+        speed = speeds[label]["grasping"]
         row = {"task": _describe(label), "env_steps_per_s": speed,
-               "vs_ant_v5": speed / summary["ant_v5_steps_per_s"], "controllers": {}}
+               "vs_ant_v5": speed / summary["ant_v5_steps_per_s"],
+               "random_actions_env_steps_per_s": speeds[label]["random"],
+               "random_actions_vs_ant_v5": speeds[label]["random"] / summary["ant_v5_steps_per_s"], "controllers": {}}
         for policy in POLICIES:
             result = results[(label, policy)]
             reference = results[(OUTCOME_REFERENCE, policy)]
@@ -342,7 +346,8 @@ def grasp_outcomes(episodes: int, seed: int, workers: int, out: Path) -> dict:
             print(f"| {label} | {policy} | {result['success_rate']:.2f} | {agree['label_agreement']:.3f} |"
                   f" {1e3 * agree['median_position_gap_m']:.2f} | {1e3 * agree['p90_position_gap_m']:.1f} |"
                   f" {_millimetres(agree['median_position_gap_where_reference_holds_m'])} |"
-                  f" {result['endings']['solver_failure']} | {speed:.0f} ({row['vs_ant_v5']:.2f}×) |")
+                  f" {result['endings']['solver_failure']} | {speed:.0f}, {speeds[label]['random']:.0f} "
+                  f"({row['vs_ant_v5']:.3f}×, {row['random_actions_vs_ant_v5']:.3f}×) |")
         controllers = row["controllers"].values()
         row["worst_label_agreement"] = min(c["label_agreement"] for c in controllers)
         row["worst_median_position_gap_m"] = max(c["median_position_gap_m"] for c in controllers)
@@ -363,9 +368,10 @@ def grasp_outcomes(episodes: int, seed: int, workers: int, out: Path) -> dict:
     return summary
 
 
-def time_settings(seed: int, steps: int = 120, repeats: int = 3) -> dict:
-    """Env steps per second of every setting, one env under the reactive controller from seed ``seed`` for
-    ``steps`` actions (resetting as episodes end), the best of ``repeats``; and Ant-v5's, timed in the same run
+def time_settings(seed: int, steps: int = 240, repeats: int = 3) -> dict:
+    """Env steps per second of every setting, one env for ``steps`` actions from seed ``seed`` (resetting as episodes
+    end), the best of ``repeats``: grasping (the reactive controller) and on random actions (mostly free motion, as
+    ``benchmarks.env_speed`` times it), as {label: {"grasping": …, "random": …}}; and Ant-v5's, timed in the same run
     (key ``"ant_v5"``)."""
     import gymnasium as gym
 
@@ -374,21 +380,24 @@ def time_settings(seed: int, steps: int = 120, repeats: int = 3) -> dict:
     from benchmarks.env_speed import time_ant
     from soft_gripper_env.grasp_task import GraspTask
 
-    def once(label: str) -> float:
-        env = gym.make(soft_gripper_env.ENV_ID, model=OUTCOME_SETTINGS[label]["model"], **_task_fields(label))
-        policy = ReactivePolicy(GraspTask(model=OUTCOME_SETTINGS[label]["model"], **_task_fields(label)))
+    def once(label: str, grasping: bool) -> float:
+        model = OUTCOME_SETTINGS[label]["model"]
+        env = gym.make(soft_gripper_env.ENV_ID, model=model, **_task_fields(label))
+        env.action_space.seed(seed)
+        policy = ReactivePolicy(GraspTask(model=model, **_task_fields(label))) if grasping else None
         obs, _ = env.reset(seed=seed)
         start = time.perf_counter()
         for _ in range(steps):
-            obs, _, terminated, truncated, _ = env.step(policy(obs))
+            obs, _, terminated, truncated, _ = env.step(policy(obs) if grasping else env.action_space.sample())
             if terminated or truncated:
                 obs, _ = env.reset()
         return steps / (time.perf_counter() - start)
 
     speeds = {"ant_v5": max(time_ant() for _ in range(repeats))}
     for label in tqdm(OUTCOME_SETTINGS, desc="timing", unit="setting", file=sys.stdout):
-        once(label)  # compile or load the kernels
-        speeds[label] = max(once(label) for _ in range(repeats))
+        once(label, True)  # compile or load the kernels
+        speeds[label] = {kind: max(once(label, kind == "grasping") for _ in range(repeats))
+                         for kind in ("grasping", "random")}
     return speeds
 
 
@@ -457,8 +466,8 @@ def plot_grasp_outcomes(summary: dict, path: Path) -> None:
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_ylim(bottom=0.0)
         ax.set_ylabel(ylabel)
-        ax.set_xlabel(f"env steps per second of one env, as multiples of Ant-v5 "
-                      f"({summary['ant_v5_steps_per_s']:,.0f} steps/s in the same run)")
+        ax.set_xlabel(f"env steps per second of one env grasping (the reactive controller), as multiples of Ant-v5 "
+                      f"({summary['ant_v5_steps_per_s']:,.0f} steps/s in the same run)", fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=8, loc="upper left")
     fig.suptitle(f"grasp outcomes of each speed setting against the fine reference (3-D, N = 20, Δt = 2.5 ms, "
