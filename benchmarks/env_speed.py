@@ -40,21 +40,27 @@ CORE_GOALS = {"paper_scene_planar_ms": 2.0, "paper_scene_3d_ms": 10.0, "batched_
 """The physics core's goals, absolute on the reference 2-core machine."""
 
 
-def time_ant(steps: int = ANT_STEPS) -> float:
-    """Ant-v5 steps per second on random actions."""
-    import gymnasium as gym
-
-    env = gym.make("Ant-v5")
+def steps_per_second(env, steps: int) -> float:
+    """Env steps per second of ``env`` (one env or a vector) over ``steps`` random actions from a reset with seed 0;
+    one env is reset when its episode ends (a vector resets its own). Closes ``env``."""
+    envs = getattr(env, "num_envs", 1)
     env.action_space.seed(0)
     env.reset(seed=0)
     start = time.perf_counter()
     for _ in range(steps):
         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-        if terminated or truncated:
+        if envs == 1 and (terminated or truncated):
             env.reset()
     seconds = time.perf_counter() - start
     env.close()
-    return steps / seconds
+    return steps * envs / seconds
+
+
+def time_ant(steps: int = ANT_STEPS) -> float:
+    """Ant-v5 steps per second on random actions."""
+    import gymnasium as gym
+
+    return steps_per_second(gym.make("Ant-v5"), steps)
 
 
 def time_single(model: str, steps: int) -> float:
@@ -63,17 +69,7 @@ def time_single(model: str, steps: int) -> float:
 
     import soft_gripper_env
 
-    env = gym.make(soft_gripper_env.ENV_ID, model=model)
-    env.action_space.seed(0)
-    env.reset(seed=0)
-    start = time.perf_counter()
-    for _ in range(steps):
-        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-        if terminated or truncated:
-            env.reset()
-    seconds = time.perf_counter() - start
-    env.close()
-    return steps / seconds
+    return steps_per_second(gym.make(soft_gripper_env.ENV_ID, model=model), steps)
 
 
 def time_vector(model: str, num_envs: int, steps: int, num_threads: int = 1) -> float:
@@ -82,15 +78,8 @@ def time_vector(model: str, num_envs: int, steps: int, num_threads: int = 1) -> 
 
     import soft_gripper_env
 
-    env = gym.make_vec(soft_gripper_env.ENV_ID, num_envs=num_envs, model=model, num_threads=num_threads)
-    env.action_space.seed(0)
-    env.reset(seed=0)
-    start = time.perf_counter()
-    for _ in range(steps):
-        env.step(env.action_space.sample())
-    seconds = time.perf_counter() - start
-    env.close()
-    return steps * num_envs / seconds
+    return steps_per_second(gym.make_vec(soft_gripper_env.ENV_ID, num_envs=num_envs, model=model,
+                                         num_threads=num_threads), steps)
 
 
 def best(function, repeats: int, *args) -> float:
