@@ -128,8 +128,8 @@ def rod_frames(qr, tangent_old, director_old, ref_twist_old, tangent, director1,
 def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, grad, hess, vectors, blocks,
                 accumulate_hessian):
     """Bending and twisting energy at one interior node; writes its gradient (11,) and the lower triangle of its
-    Hessian (11, 11) over (x_{i−1}, θ_e, x_i, θ_f, x_{i+1}). ``eb`` = EI/l_i, ``gj`` = GJ/l_i. ``vectors`` (3, 11) and ``blocks``
-    (3, 3, 3) are scratch space."""
+    Hessian (11, 11) over (x_{i−1}, θ_e, x_i, θ_f, x_{i+1}). ``eb`` = EI/l_i, ``gj`` = GJ/l_i. ``vectors`` (3, 11)
+    and ``blocks`` (3, 3, 3) are scratch space."""
     chi = 1.0 + _dot(te, tf)
     kb = _scale(2.0 / chi, _cross(te, tf))
     tt = _scale(1.0 / chi, _axpy(1.0, te, 1.0, tf))
