@@ -20,7 +20,7 @@ import numpy as np
 
 from .kernels.assembly import N_DESIGN_FIELDS, RodArrays, StepInputs, assemble
 from .kernels.body import BodyArrays, BodyMotion, BodyState, palm_reactions
-from .kernels.contact import normal_reactions, object_in_rod_frames
+from .kernels.contact import contact_reactions, object_in_rod_frames
 from .kernels.finger_contact import FingerContact, find_near_fingers
 from .kernels.forces import rod_water_velocity
 from .kernels.rod_3d import rod3d_elastic, rod3d_update_frames
@@ -504,7 +504,7 @@ class Simulator:
         extrapolated to the end of its step of 2·``dt`` (:func:`~.solvers.newton.midpoint_end`). The scene's
         integrator composes its step from these (:mod:`.solvers.integrators`)."""
         disc = self.disc
-        R, N, S, D = self.n_rods, disc.n_nodes, disc.stride, disc.dim
+        R, N, S = self.n_rods, disc.n_nodes, disc.stride
         q_old, v_old = state.q.reshape(R, N, S), velocity_old.reshape(R, N, S)
         extrapolate = state.acceleration is not None and velocity_old is state.velocity  # not for a pseudo-step
         acceleration_old = state.acceleration.reshape(R, N, S) if extrapolate else self._no_acceleration
@@ -552,15 +552,15 @@ class Simulator:
                                reference_twist=reference_twist.reshape(shape))
         contact = None
         if held is not None:
-            reaction = np.zeros((R, N, S))
-            reaction[..., :D] = result.residual.reshape(R, N, S)[..., :D] * held[..., None] + holds.friction
             geometry = self._geometry  # the object as each rod sees it at the solution
+            reaction, normal = np.empty((B, F, N, 3)), np.empty((B, F, N))
+            contact_reactions(q, result.residual, held, holds.friction, geometry.starts, geometry.ends,
+                              disc.finger_directions, reaction.reshape(R, N, 3), normal.reshape(R, N))
             contact = ContactReport(
                 held=held.reshape(B, F, N),
                 sliding=holds.sliding.reshape(B, F, N),
-                reaction=disc.world_positions(reaction.reshape(B, F, N, S)),
-                normal_reaction=normal_reactions(q[..., :D], reaction[..., :D], geometry.starts,
-                                                 geometry.ends).reshape(B, F, N),
+                reaction=reaction,
+                normal_reaction=normal,
                 corrector_iterations=result.corrector.reshape(B, F).max(axis=1),
                 resolved=~result.changed.reshape(B, F).any(axis=1),
                 palm_reaction=None if body is None else self._body.palm_reaction(

@@ -68,20 +68,34 @@ def object_in_rod_frames(obj: GraspedObject, finger_directions: np.ndarray, fing
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def normal_reactions(positions, reactions, starts, ends):
-    """The component of each node's reaction (R, N, D) [N] along the outward normal of its rod's object there (the
-    direction from the nearest point of the segment ``starts``–``ends`` (R, D) to the node (R, N, D)), (R, N)."""
-    n_rods, n_nodes, dim = positions.shape
-    normal = np.empty((n_rods, n_nodes))
+def contact_reactions(q, residual, held, friction, starts, ends, finger_directions, reaction, normal):
+    """The object's force on every node at a step's solution, as the step reports it: the unbalanced force of a
+    held node's equation of motion (its Newton ``residual`` (R, n) where ``held`` (R, N)) plus its ``friction``
+    (R, N, D) [N], written into ``reaction`` (R, N, 3) in the world frame (a planar rod's (s, z) along its finger's
+    direction (F, 3) and up); and the component along the outward normal of the rod's object at the node (the
+    direction from the nearest point of the segment ``starts``–``ends`` (R, D) to the node at ``q`` (R, N, S)),
+    written into ``normal`` (R, N)."""
+    n_rods, n_nodes, stride = q.shape
+    dim = friction.shape[2]
+    n_fingers = finger_directions.shape[0]
+    local = np.empty(dim)
     nearest = np.empty(dim)
     for r in range(n_rods):
         for i in range(n_nodes):
-            distance = distance_to_segment(positions[r, i], starts[r], ends[r], nearest)
+            for k in range(dim):
+                local[k] = residual[r, i * stride + k] * held[r, i] + friction[r, i, k]
+            if dim == 3:
+                for k in range(3):
+                    reaction[r, i, k] = local[k]
+            else:
+                for k in range(3):
+                    reaction[r, i, k] = local[0] * finger_directions[r % n_fingers, k]
+                reaction[r, i, 2] += local[1]
+            distance = distance_to_segment(q[r, i, :dim], starts[r], ends[r], nearest)
             along = 0.0
             for k in range(dim):
-                along += reactions[r, i, k] * (positions[r, i, k] - nearest[k])
+                along += local[k] * (q[r, i, k] - nearest[k])
             normal[r, i] = along / distance
-    return normal
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -254,5 +268,5 @@ def rotate_node(band, first, basis):
             band[first + a, kd - a + m] = value
 
 
-__all__ = ["ObjectView", "object_in_rod_frames", "normal_reactions", "within_reach", "find_penetrations",
+__all__ = ["ObjectView", "object_in_rod_frames", "contact_reactions", "within_reach", "find_penetrations",
            "distance_to_segment", "onto_surface", "tangent_basis", "rotate_node"]
