@@ -18,7 +18,7 @@ from soft_gripper_env.physics import (
     paper_scene,
     run_ramp,
 )
-from soft_gripper_env.physics.kernels.contact import object_in_rod_frames, within_reach
+from soft_gripper_env.physics.kernels.contact import contact_reactions, object_in_rod_frames, within_reach
 
 
 def reachable(obj, finger_directions, length, planar):
@@ -385,3 +385,29 @@ def test_a_sliding_nodes_frame_turns_its_band_exactly(stride, dim):
         for j in range(max(0, i - kd), i + 1):
             assert band[i, kd - i + j] == pytest.approx(expected[i, j], abs=1e-13)
     assert np.abs(np.tril(expected, -kd - 1)).max() == 0.0
+
+
+@pytest.mark.parametrize("stride, dim", [(2, 2), (4, 3)])
+def test_contact_reactions_match_a_direct_computation(stride, dim):
+    """The reported reaction (held nodes' residual plus friction, to the world frame) and its normal part, against
+    the same quantities computed node by node in NumPy, for random rods of two grippers."""
+    rng = np.random.default_rng(11)
+    n_fingers, n_rods, n_nodes = 3, 6, 5
+    directions = np.array([[math.cos(a), math.sin(a), 0.0] for a in (0.3, 2.4, 4.5)])
+    q = rng.normal(size=(n_rods, n_nodes, stride))
+    residual = rng.normal(size=(n_rods, n_nodes * stride))
+    held = rng.random((n_rods, n_nodes)) < 0.5
+    friction = rng.normal(size=(n_rods, n_nodes, dim)) * held[..., None]
+    starts, ends = rng.normal(size=(n_rods, dim)), rng.normal(size=(n_rods, dim))
+    reaction, normal = np.empty((n_rods, n_nodes, 3)), np.empty((n_rods, n_nodes))
+    contact_reactions(q, residual, held, friction, starts, ends, directions, reaction, normal)
+    for r in range(n_rods):
+        for i in range(n_nodes):
+            local = residual[r, i * stride:i * stride + dim] * held[r, i] + friction[r, i]
+            world = local if dim == 3 else local[0] * directions[r % n_fingers] + np.array([0.0, 0.0, local[1]])
+            np.testing.assert_allclose(reaction[r, i], world, rtol=1e-14, atol=1e-14)
+            segment = ends[r] - starts[r]
+            t = np.clip(np.dot(q[r, i, :dim] - starts[r], segment) / np.dot(segment, segment), 0.0, 1.0)
+            outward = q[r, i, :dim] - (starts[r] + t * segment)
+            expected = np.dot(local, outward / np.linalg.norm(outward))
+            assert normal[r, i] == pytest.approx(expected, rel=1e-12, abs=1e-12)
