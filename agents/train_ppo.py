@@ -1,6 +1,7 @@
 """Train PPO (Stable-Baselines3) on SoftGripperUnderwater-v0 and compare it with the scripted baselines.
 
-    python -m agents.train_ppo --out out/ppo [--timesteps 300000] [--num-envs 32] [--seed 0] [--eval-episodes 20]
+    python -m agents.train_ppo --out out/ppo [--timesteps 300000] [--num-envs 32] [--num-threads 1] [--seed 0]
+        [--eval-episodes 20]
 
 All episodes of one rollout are stepped in one batched simulator (agents/sb3_vec_env.py); observations and
 rewards are normalised by VecNormalize, whose statistics are saved with the model (out/ppo/ppo_model.zip,
@@ -58,15 +59,19 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--out", type=Path, default=Path("out") / "ppo")
     parser.add_argument("--timesteps", type=int, default=300_000)
     parser.add_argument("--num-envs", type=int, default=32)
+    parser.add_argument("--num-threads", type=int, default=1,
+                        help="threads stepping the envs (at most --num-envs; 2 uses both cores of a 2-core machine)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--eval-episodes", type=int, default=20)
     args = parser.parse_args(argv)
-    for name in ("timesteps", "num_envs", "eval_episodes"):
+    for name in ("timesteps", "num_envs", "num_threads", "eval_episodes"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} = {getattr(args, name)} must be at least 1")
     args.out.mkdir(parents=True, exist_ok=True)
 
-    env = VecNormalize(VecMonitor(SoftGripperSB3VecEnv(args.num_envs, seed=args.seed),
+    if args.num_threads > args.num_envs:
+        parser.error(f"--num-threads = {args.num_threads} must be at most --num-envs = {args.num_envs}")
+    env = VecNormalize(VecMonitor(SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads),
                                   info_keywords=("is_success",)), gamma=0.99)
     # a narrow initial action spread (std 0.6) lets κ̄ drift far enough to find contact without slamming
     model = PPO("MlpPolicy", env, n_steps=128, batch_size=min(1024, 128 * args.num_envs), n_epochs=10,

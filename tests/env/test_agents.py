@@ -33,12 +33,9 @@ def test_sb3_vec_env_autoresets_in_the_same_step_and_reports_truncation():
     assert env.get_attr("render_mode") == [None, None] and env.env_is_wrapped(object) == [False, False]
 
 
-def test_sb3_vec_env_seeds_like_single_envs():
-    import gymnasium as gym
-
-    import soft_gripper_env
-
-    env = SoftGripperSB3VecEnv(num_envs=2, seed=7)
+@pytest.mark.parametrize("num_threads", [1, 2])
+def test_sb3_vec_env_seeds_like_single_envs(num_threads):
+    env = SoftGripperSB3VecEnv(num_envs=2, seed=7, num_threads=num_threads)
     obs = env.reset()
     single, _ = gym.make(soft_gripper_env.ENV_ID).reset(seed=8)
     np.testing.assert_allclose(obs[1], single, atol=1e-7)
@@ -151,3 +148,5 @@ def test_scripts_reject_bad_arguments(tmp_path):
     assert out.returncode == 2 and "--episodes = 0 must be at least 1" in out.stderr
     out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path), "--timesteps", "0")
     assert out.returncode == 2 and "--timesteps = 0 must be at least 1" in out.stderr
+    out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path), "--num-envs", "2", "--num-threads", "3")
+    assert out.returncode == 2 and "--num-threads = 3 must be at most --num-envs = 2" in out.stderr
