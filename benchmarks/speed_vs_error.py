@@ -296,7 +296,7 @@ def grasp_outcomes(episodes: int, seed: int, workers: int, out: Path) -> dict:
     episodes and seed takes it from there: an interrupted study resumes where it stopped."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from benchmarks.contact_outcomes import POLICIES, agreement, run_pair
+    from benchmarks.contact_outcomes import POLICIES, run_pair
 
     runs = out / "grasp_outcome_runs"
     runs.mkdir(parents=True, exist_ok=True)
@@ -317,7 +317,21 @@ def grasp_outcomes(episodes: int, seed: int, workers: int, out: Path) -> dict:
                 results[job] = future.result()
                 (runs / _run_name(job)).write_text(json.dumps(results[job]))
     print("timing each setting alone (one env, the reactive controller) against Ant-v5 ...", flush=True)
-    speeds = time_settings(seed)
+    summary = summarize_outcomes(results, time_settings(seed), episodes, seed)
+    (out / "grasp_outcomes.json").write_text(json.dumps(summary, indent=1))
+    print(f"wrote {out / 'grasp_outcomes.json'}")
+    plot_grasp_outcomes(summary, out / "grasp_outcomes.png")
+    return summary
+
+
+def summarize_outcomes(results: dict, speeds: dict, episodes: int, seed: int) -> dict:
+    """The study's summary from the runs ``results`` {(label, controller): :func:`agents.evaluate.evaluate`'s
+    result} and ``speeds`` (:func:`time_settings`): per setting and controller, the agreement with the reference
+    (:func:`benchmarks.contact_outcomes.agreement`, and the median gap where the reference holds), and per setting
+    the worst of its controllers, its speed and whether it meets :data:`OUTCOME_GOALS`. Prints the table."""
+    from benchmarks.contact_outcomes import POLICIES, agreement
+
+    speeds = dict(speeds)
     summary = {"episodes": episodes, "first_seed": seed, "reference": OUTCOME_REFERENCE, "default": OUTCOME_DEFAULT,
                "goals": OUTCOME_GOALS, "ant_v5_steps_per_s": speeds.pop("ant_v5"), "settings": {}}
     print(f"\n{episodes} seeds from {seed} per controller; agreement with the reference "
@@ -362,9 +376,6 @@ def grasp_outcomes(episodes: int, seed: int, workers: int, out: Path) -> dict:
             print(f"  {label}: {'meets' if row['meets_goals'] else 'misses'} them (worst agreement "
                   f"{row['worst_label_agreement']:.3f}, worst median gap {1e3 * row['worst_median_position_gap_m']:.2f}"
                   f" mm){'  <- the default' if label == OUTCOME_DEFAULT else ''}")
-    (out / "grasp_outcomes.json").write_text(json.dumps(summary, indent=1))
-    print(f"wrote {out / 'grasp_outcomes.json'}")
-    plot_grasp_outcomes(summary, out / "grasp_outcomes.png")
     return summary
 
 

@@ -1,12 +1,21 @@
-"""The refactoring guard (scripts/golden_outputs.py) and the commit comparison (benchmarks/compare_commits.py)."""
+"""The refactoring guard (scripts/golden_outputs.py), the commit comparison (benchmarks/compare_commits.py) and the
+grasp-outcome study's scoring (benchmarks/speed_vs_error.py)."""
 
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from benchmarks.compare_commits import higher_is_faster
+from benchmarks.speed_vs_error import (
+    OUTCOME_DEFAULT,
+    OUTCOME_REFERENCE,
+    OUTCOME_SETTINGS,
+    plot_grasp_outcomes,
+    summarize_outcomes,
+)
 from scripts.golden_outputs import compare
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,3 +53,42 @@ def test_compare_commits_refuses_an_unknown_base():
                          capture_output=True, text=True, timeout=120)
     assert out.returncode != 0
     assert "--base 'no-such-commit' is not a commit" in out.stderr
+
+
+def test_grasp_outcome_summary_scores_settings_against_the_reference(tmp_path):
+    """On synthetic runs of 20 seeds: a setting equal to the reference meets the goals; one that flips 2 labels of
+    one controller (90 % agreement) misses them, as does one that leaves every object 6 mm away; the worse
+    controller decides; the gap where the reference holds counts only those seeds; the plot is written."""
+    seeds = 20
+    rng = np.random.default_rng(0)
+    successes = rng.random(seeds) < 0.5
+    positions = rng.normal(size=(seeds, 3)) * 0.05
+
+    def run(successes, positions):
+        return {"successes": [bool(x) for x in successes], "final_object_positions": positions.tolist(),
+                "success_rate": float(np.mean(successes)), "endings": {"solver_failure": 0}}
+
+    flipped = successes.copy()
+    flipped[:2] = ~flipped[:2]
+    shifted = positions + np.array([0.006, 0.0, 0.0])
+    labels = list(OUTCOME_SETTINGS)
+    other, far = [label for label in labels if label not in (OUTCOME_REFERENCE, OUTCOME_DEFAULT)][:2]
+    results = {}
+    for label in labels:
+        for policy in ("ramp", "reactive"):
+            results[(label, policy)] = run(successes, positions)
+    results[(other, "reactive")] = run(flipped, positions)
+    for policy in ("ramp", "reactive"):
+        results[(far, policy)] = run(successes, shifted)
+    speeds = {"ant_v5": 1000.0, **{label: {"grasping": 10.0 + k, "random": 20.0 + k} for k, label in enumerate(labels)}}
+    summary = summarize_outcomes(results, speeds, seeds, 7000)
+    rows = summary["settings"]
+    assert rows[OUTCOME_DEFAULT]["meets_goals"] and rows[OUTCOME_DEFAULT]["worst_label_agreement"] == 1.0
+    assert rows[other]["worst_label_agreement"] == 0.9 and not rows[other]["meets_goals"]
+    assert rows[other]["controllers"]["ramp"]["label_agreement"] == 1.0
+    assert rows[far]["worst_median_position_gap_m"] == pytest.approx(0.006) and not rows[far]["meets_goals"]
+    held_gap = rows[far]["controllers"]["ramp"]["median_position_gap_where_reference_holds_m"]
+    assert held_gap == pytest.approx(0.006)
+    assert rows[far]["vs_ant_v5"] == pytest.approx(speeds[far]["grasping"] / 1000.0)
+    plot_grasp_outcomes(summary, tmp_path / "outcomes.png")
+    assert (tmp_path / "outcomes.png").stat().st_size > 10_000
