@@ -204,7 +204,6 @@ class Simulator:
             body_loads.sphere_drag > 0 or body_loads.froude_krylov > 0 or body_loads.sphere_added_mass > 0))
         self._currents = CurrentBatch(B) if moving_water else None
         self._water_cache: tuple[float, tuple[np.ndarray, np.ndarray] | None] = (math.nan, None)
-        self._current_memo: dict[float, np.ndarray] = {}
         if not moving_water:
             still = np.zeros((B, 3))
             self._water_cache = (math.inf, (still, rod_water_velocity(disc, still)))  # for all time
@@ -230,8 +229,8 @@ class Simulator:
         self.scenes[index] = scene
         self._load(index, scene)
         if self._currents is not None:
-            self._currents.start_time[index] = start_time
-            self._forget_water()
+            self._currents.set_clock(index, start_time)
+            self._water_cache = (math.nan, None)
 
     def _load(self, index: int, scene: Scene) -> None:
         """Writes gripper ``index``'s object and current into the per-gripper arrays (the scene already checked)."""
@@ -365,8 +364,8 @@ class Simulator:
             if sub.scenes[index] is not scene:
                 sub.set_scene(index, scene)
         if self._currents is not None:
-            sub._currents.start_time[:] = self._currents.start_time[grippers]
-            sub._forget_water()
+            sub._currents.set_clock(slice(None), self._currents.start_time[grippers])
+            sub._water_cache = (math.nan, None)
         return sub
 
     def equilibrium(self, state: RodState, natural_curvature, max_steps: int = 200) -> StepResult:
@@ -446,24 +445,9 @@ class Simulator:
         """The current at ``time`` at every gripper (B, 3) and as every rod sees it (R, D) [m/s], kept for the solves
         of a step; still water in a scene without drag."""
         if self._currents is not None and self._water_cache[0] != time:
-            grippers = self._current_at(time)
+            grippers = self._currents.at(time)
             self._water_cache = (time, (grippers, rod_water_velocity(self.disc, grippers)))
         return self._water_cache[1]
-
-    def _current_at(self, time: float) -> np.ndarray:
-        """The current at every gripper at ``time`` [m/s], (B, 3), remembered for the few times a step asks for
-        (its start and end: a step's end is the next one's start)."""
-        velocity = self._current_memo.get(time)
-        if velocity is None:
-            if len(self._current_memo) >= 2:
-                del self._current_memo[next(iter(self._current_memo))]  # the oldest
-            velocity = self._current_memo[time] = self._currents.at(time)
-        return velocity
-
-    def _forget_water(self) -> None:
-        """Drops the remembered current after a gripper's current or clock changed."""
-        self._water_cache = (math.nan, None)
-        self._current_memo.clear()
 
     def _free_mask(self, held: np.ndarray) -> np.ndarray:
         """Free DOFs of every rod, (R, n): the clamp's, less the positions of nodes held by contact."""
@@ -595,9 +579,8 @@ class Simulator:
                                                                 state.body_orientation,
                                                                 state.body_angular_velocity)))
             body = self._body.plain_arrays
-            # the water's mean acceleration over the step, as CurrentBatch.mean_acceleration computes it
             water_acceleration = np.zeros((self.batch_size, 3)) if self._currents is None else \
-                (self._current_at(state.time + dt) - self._current_at(state.time)) / dt
+                self._currents.mean_acceleration(state.time, dt)
             motion = BodyMotion(old.position + dt * old.velocity, dt * old.angular_velocity,
                                 np.empty((self.batch_size, 3, 3)), old, self._water(state.time)[0],
                                 water_acceleration)  # the predictor

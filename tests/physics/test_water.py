@@ -229,9 +229,12 @@ def test_current_phase_and_each_grippers_clock():
     from soft_gripper_env.physics.scene.fluid import CurrentBatch
 
     batch = CurrentBatch.of([current, current])
-    batch.start_time[1] = 0.75  # gripper 1's episode began at batch time 0.75 s
+    np.testing.assert_allclose(batch.at(1.0)[1], current.at(1.0), rtol=1e-15)  # remembered, then forgotten below
+    batch.set_clock(1, 0.75)  # gripper 1's episode began at batch time 0.75 s
     np.testing.assert_allclose(batch.at(1.0)[1], current.at(0.25), rtol=1e-14)
     np.testing.assert_allclose(batch.at(1.0)[0], current.at(1.0), rtol=1e-15)
+    batch.load(0, Current(velocity=(0.3, 0.0, 0.0)))  # a new current is not read from memory either
+    np.testing.assert_allclose(batch.at(1.0)[0], [0.3, 0.0, 0.0], rtol=1e-15)
 
 
 @pytest.mark.parametrize("model", ["planar", "3d"])

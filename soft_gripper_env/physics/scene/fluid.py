@@ -52,7 +52,8 @@ class Current:
 class CurrentBatch:
     """The currents of a batch of grippers, as arrays: mean and amplitude (B, 3) [m/s], period (B,) [s], phase (B,)
     [rad], and the batch time at which each gripper's own clock reads 0 (B,) [s]. A gripper's entry is replaced with
-    :meth:`load`."""
+    :meth:`load`, its clock with :meth:`set_clock`; the arrays are read-only otherwise, since :meth:`at` remembers
+    what it computed."""
 
     def __init__(self, batch_size: int) -> None:
         self.velocity = np.zeros((batch_size, 3))
@@ -60,6 +61,7 @@ class CurrentBatch:
         self.period = np.ones(batch_size)
         self.phase = np.zeros(batch_size)
         self.start_time = np.zeros(batch_size)
+        self._remembered: dict[float, np.ndarray] = {}
 
     @classmethod
     def of(cls, currents) -> CurrentBatch:
@@ -73,11 +75,23 @@ class CurrentBatch:
         self.oscillation[index] = current.oscillation
         self.period[index] = current.period
         self.phase[index] = current.phase
+        self._remembered.clear()
+
+    def set_clock(self, index, start_time) -> None:
+        """Sets the batch time [s] at which the clocks of grippers ``index`` (an index, slice or index array) read 0."""
+        self.start_time[index] = start_time
+        self._remembered.clear()
 
     def at(self, time: float) -> np.ndarray:
-        """The water's velocity at every gripper at ``time`` [m/s], (B, 3)."""
-        angle = 2 * math.pi * (time - self.start_time) / self.period + self.phase
-        return self.velocity + self.oscillation * np.sin(angle)[:, None]
+        """The water's velocity at every gripper at ``time`` [m/s], (B, 3). The last two times asked for are
+        remembered: a simulator asks for a step's start and end, and a step's end is the next one's start."""
+        velocity = self._remembered.get(time)
+        if velocity is None:
+            if len(self._remembered) >= 2:
+                del self._remembered[next(iter(self._remembered))]  # the oldest
+            angle = 2 * math.pi * (time - self.start_time) / self.period + self.phase
+            velocity = self._remembered[time] = self.velocity + self.oscillation * np.sin(angle)[:, None]
+        return velocity
 
     def mean_acceleration(self, time: float, dt: float) -> np.ndarray:
         """The water's mean acceleration over [time, time + dt] at every gripper, (u(t + Δt) − u(t))/Δt [m/s²],
