@@ -290,21 +290,15 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         bounds = np.linspace(0, self.num_envs, self.num_threads + 1).round().astype(int)
-        self._shards = [_Shard(self.task, hi - lo, self.max_episode_steps, self._low, self._high)
-                        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
-        self._starts = bounds[:-1]
+        self._shard_ranges = list(zip(bounds[:-1], bounds[1:], strict=True))
+        """Each shard's envs, as (first, end) index pairs."""
+        self._shards = [_Shard(self.task, end - first, self.max_episode_steps, self._low, self._high)
+                        for first, end in self._shard_ranges]
         self._pool = None
         if self.num_threads > 1:
             from concurrent.futures import ThreadPoolExecutor
 
             self._pool = ThreadPoolExecutor(self.num_threads, thread_name_prefix="soft-gripper-shard")
-
-    @property
-    def _batch(self) -> GraspBatch:
-        """The batch of a one-thread vector (the shards' batches are each shard's)."""
-        if len(self._shards) != 1:
-            raise AttributeError("a vector of several threads has one GraspBatch per shard: see _shards")
-        return self._shards[0].batch
 
     def _map(self, method: str, *per_shard):
         """Calls ``method`` of every shard with its share of ``per_shard`` arguments, on the threads if several."""
@@ -342,8 +336,7 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
 
     def _split(self, values):
         """``values`` (one per env) cut into the shards' shares."""
-        ends = list(self._starts[1:]) + [self.num_envs]
-        return [values[lo:hi] for lo, hi in zip(self._starts, ends, strict=True)]
+        return [values[first:end] for first, end in self._shard_ranges]
 
     def close_extras(self, **kwargs) -> None:
         if self._pool is not None:
