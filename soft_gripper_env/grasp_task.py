@@ -332,26 +332,23 @@ class GraspBatch:
             failed |= running & ~ok
             keep = running & ok
             contact = result.contact
-            if keep.all():  # the common case, without the masks
+            every = keep.all()  # the common case needs no masks
+            if every:
                 self.state = result.state
-                if contact is not None:
-                    impulse += np.maximum(contact.normal_reaction, 0.0) * task.physics_dt
-                    force_impulse += contact.reaction * task.physics_dt
-                iterations += result.newton_iterations
-                self.natural_curvature = np.clip(self.natural_curvature + rate * task.physics_dt, low, high)
-                self.time += task.physics_dt
-                continue
-            index = np.nonzero(keep)[0]
-            # the batch's clock runs on for all
-            self.state = replace(put_grippers(self.state, index, take_grippers(result.state, index)),
-                                 time=result.state.time)
-            step = np.where(keep, task.physics_dt, 0.0)  # the time each episode advanced [s], (B,)
-            if contact is not None:  # a failed episode's reactions may be NaN: masked, not multiplied
-                impulse += np.where(keep[:, None, None], np.maximum(contact.normal_reaction, 0.0), 0.0) * \
-                    task.physics_dt
-                force_impulse += np.where(keep[:, None, None, None], contact.reaction, 0.0) * task.physics_dt
-            iterations += np.where(keep, result.newton_iterations, 0)
-            self.natural_curvature = np.clip(self.natural_curvature + rate * step[:, None], low, high)
+            else:  # the batch's clock runs on for all
+                index = np.nonzero(keep)[0]
+                self.state = replace(put_grippers(self.state, index, take_grippers(result.state, index)),
+                                     time=result.state.time)
+            step = task.physics_dt if every else np.where(keep, task.physics_dt, 0.0)  # each episode's advance [s]
+            if contact is not None:
+                normal, reaction = np.maximum(contact.normal_reaction, 0.0), contact.reaction
+                if not every:  # a failed episode's reactions may be NaN: masked, not multiplied
+                    normal = np.where(keep[:, None, None], normal, 0.0)
+                    reaction = np.where(keep[:, None, None, None], reaction, 0.0)
+                impulse += normal * task.physics_dt
+                force_impulse += reaction * task.physics_dt
+            iterations += result.newton_iterations if every else np.where(keep, result.newton_iterations, 0)
+            self.natural_curvature = np.clip(self.natural_curvature + rate * np.reshape(step, (-1, 1)), low, high)
             self.time += step
             running = keep
         self.newton_iterations = np.where(active, iterations, self.newton_iterations)
