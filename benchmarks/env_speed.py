@@ -40,17 +40,19 @@ CORE_GOALS = {"paper_scene_planar_ms": 2.0, "paper_scene_3d_ms": 10.0, "batched_
 """The physics core's goals, absolute on the reference 2-core machine."""
 
 
-def steps_per_second(env, steps: int) -> float:
-    """Env steps per second of ``env`` (one env or a vector) over ``steps`` random actions from a reset with seed 0;
-    one env is reset when its episode ends (a vector resets its own). Closes ``env``."""
+def steps_per_second(env, steps: int, policy=None, seed: int = 0) -> float:
+    """Env steps per second of ``env`` (one env or a vector) over ``steps`` actions, random or ``policy``'s (a
+    callable of the observation), from a reset with ``seed``; one env is reset when its episode ends (a vector
+    resets its own). Closes ``env``."""
     envs = getattr(env, "num_envs", 1)
-    env.action_space.seed(0)
-    env.reset(seed=0)
+    env.action_space.seed(seed)
+    observation, _ = env.reset(seed=seed)
     start = time.perf_counter()
     for _ in range(steps):
-        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        action = env.action_space.sample() if policy is None else policy(observation)
+        observation, _, terminated, truncated, _ = env.step(action)
         if envs == 1 and (terminated or truncated):
-            env.reset()
+            observation, _ = env.reset()
     seconds = time.perf_counter() - start
     env.close()
     return steps * envs / seconds

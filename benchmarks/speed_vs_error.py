@@ -388,21 +388,14 @@ def time_settings(seed: int, steps: int = 240, repeats: int = 3) -> dict:
 
     import soft_gripper_env
     from agents.scripted import ReactivePolicy
-    from benchmarks.env_speed import time_ant
+    from benchmarks.env_speed import steps_per_second, time_ant
     from soft_gripper_env.grasp_task import GraspTask
 
     def once(label: str, grasping: bool) -> float:
         model = OUTCOME_SETTINGS[label]["model"]
         env = gym.make(soft_gripper_env.ENV_ID, model=model, **_task_fields(label))
-        env.action_space.seed(seed)
         policy = ReactivePolicy(GraspTask(model=model, **_task_fields(label))) if grasping else None
-        obs, _ = env.reset(seed=seed)
-        start = time.perf_counter()
-        for _ in range(steps):
-            obs, _, terminated, truncated, _ = env.step(policy(obs) if grasping else env.action_space.sample())
-            if terminated or truncated:
-                obs, _ = env.reset()
-        return steps / (time.perf_counter() - start)
+        return steps_per_second(env, steps, policy, seed)
 
     speeds = {"ant_v5": max(time_ant() for _ in range(repeats))}
     for label in tqdm(OUTCOME_SETTINGS, desc="timing", unit="setting", file=sys.stdout):
