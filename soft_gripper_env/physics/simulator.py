@@ -477,6 +477,9 @@ class Simulator:
                 body_tolerance=np.repeat([force_tolerance, force_tolerance * length], 3),  # [N], [N·m]
                 max_iterations=scene.newton.max_iterations, n_fingers=self.n_fingers,
                 max_corrector_iterations=scene.contact.max_corrector_iterations,
+                friction_passes=min(scene.contact.max_corrector_iterations,
+                                    scene.contact.max_corrector_iterations if scene.contact.friction_passes is None
+                                    else scene.contact.friction_passes),
                 first_free_node=0 if scene.gripper.finger.clamp == "free" else 2,
                 force_tolerance=float(force_tolerance), finger_length=float(length)))
         return self._per_step_cache[dt]

@@ -284,6 +284,8 @@ def test_bad_reset_options_raise(env, options, pattern):
     ({"fragile_force": -1.0}, r"fragile_force = -1\.0 N is outside"),
     ({"object_friction": -0.1}, r"object_friction = -0\.1 is outside the allowed range \[0, inf\]"),
     ({"newton": 1e-6}, r"GraspTask\.newton must be a NewtonSettings, got float"),
+    ({"friction_passes": -1}, r"GraspTask\.friction_passes = -1 is outside the allowed range: None or an integer"),
+    ({"friction_passes": 2.5}, r"GraspTask\.friction_passes = 2\.5 is outside the allowed range"),
 ])
 def test_bad_settings_raise(settings_, pattern):
     with pytest.raises(ValueError, match=pattern):

@@ -351,6 +351,45 @@ def test_friction_never_adds_energy(friction_runs, model):
         assert worked > 0
 
 
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_capped_friction_passes_keep_friction_dissipative_and_the_run_close(friction_runs, model):
+    """Capping the re-solves for friction alone (ContactSettings.friction_passes = 1) leaves a sliding node with the
+    friction of its last solve: μ·R_n of the pass before, so off the cone's rim by up to a quarter here, but still
+    opposing the node's motion (no work), every step resolved, fewer re-solves than settling, and the fingers within
+    0.1 mm of the settled run at the end (μ = 0.3)."""
+    settled = friction_runs[(model, 0.3)]
+    scene = paper_scene(model, grasped_object=replace(PAPER_BALL, friction=0.3))
+    capped = run_ramp(replace(scene, contact=replace(scene.contact, friction_passes=1)))
+    assert capped.converged.all()
+    worked, off_rim = 0, 0.0
+    for k, report in enumerate(capped.contacts):
+        assert report.resolved.all()
+        normal, tangential, sliding = _cone(report)
+        off_rim = max(off_rim, float(np.max(np.abs(tangential[sliding] - 0.3 * normal[sliding])
+                                            / (0.3 * normal[sliding] + 1e-6), initial=0.0)))
+        assert np.all(tangential[~sliding] <= 0.3 * normal[~sliding] + 1e-6)
+        if report.sliding.any():
+            outward = capped.positions[k + 1] - np.asarray(PAPER_BALL.center)
+            outward /= np.linalg.norm(outward, axis=-1, keepdims=True)
+            friction = report.reaction - report.normal_reaction[..., None] * outward
+            work = np.sum(friction * (capped.positions[k + 1] - capped.positions[k]), axis=-1)[report.sliding]
+            assert np.all(work <= 1e-12)
+            worked += int((work < 0).sum())
+    assert worked > 0
+    assert 0.01 < off_rim < 0.3  # the lag shows, and stays bounded
+    passes = [sum(int(report.corrector_iterations.sum()) for report in run.contacts) for run in (capped, settled)]
+    assert passes[0] < passes[1]
+    assert np.abs(capped.positions[-1] - settled.positions[-1]).max() < 1e-4
+
+
+def test_friction_passes_are_checked():
+    """A cap on the friction passes is None or a count in [0, 100]."""
+    for bad in (-1, 101, 2.5, True):
+        with pytest.raises(ValueError, match=r"ContactSettings\.friction_passes = .*\[0, 100\]"):
+            ContactSettings(friction_passes=bad)
+    assert ContactSettings(friction_passes=0).friction_passes == 0
+
+
 @pytest.mark.parametrize("stride, dim", [(2, 2), (4, 3)])
 def test_a_sliding_nodes_frame_turns_its_band_exactly(stride, dim):
     """A sliding node is solved in its surface's frame: the band of a rod's symmetric Newton matrix (nodes coupled

@@ -129,6 +129,13 @@ PAPER_BALL = Sphere(radius=0.065, center=(0.0, 0.0, -0.09), friction=math.inf)
 class ContactSettings:
     max_corrector_iterations: int = 10
     """Re-solves of one step allowed for new contacts and releases."""
+    friction_passes: int | None = None
+    """Re-solves of one step in which a sliding node's friction that moved (in size or direction, beyond the
+    corrector's friction tolerance) is reason enough to solve again; after them a step keeps the friction of its
+    last solve, which the next step updates. New holds, releases, slides that start and nodes that stick again
+    re-solve within ``max_corrector_iterations`` either way. None settles friction within the whole budget. Capping
+    it is a speed setting: a 3-D grasp spends about a quarter of its steps cycling on friction
+    (``docs/speed_vs_error.md`` measures the cap against the grasp's outcome)."""
     palm_stiffness: float = 1000.0
     """The palm, a disc of radius ``palm_radius`` about the z axis in the plane z = 0 of the finger bases, pushes
     a free object that overlaps it back down with this stiffness [N/m] (1 mm of overlap per newton); 0 turns it
@@ -157,6 +164,11 @@ class ContactSettings:
                 not 0 <= self.max_corrector_iterations <= 100:
             raise ValueError(f"ContactSettings.max_corrector_iterations = {self.max_corrector_iterations!r} is "
                              f"outside the allowed range [0, 100] (integer count)")
+        if self.friction_passes is not None and (
+                not isinstance(self.friction_passes, (int, np.integer)) or isinstance(self.friction_passes, bool)
+                or not 0 <= self.friction_passes <= 100):
+            raise ValueError(f"ContactSettings.friction_passes = {self.friction_passes!r} is outside the allowed "
+                             f"range: None or an integer count in [0, 100]")
         check_range("ContactSettings", "palm_stiffness", self.palm_stiffness, "N/m", 0.0, 1e9, low_inclusive=True)
         check_range("ContactSettings", "palm_radius", self.palm_radius, "m", 0.0, 10.0, low_inclusive=True)
         check_range("ContactSettings", "palm_damping_depth", self.palm_damping_depth, "m", 0.0, 1.0,

@@ -144,7 +144,7 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
         within_budget = k < solver.max_corrector_iterations
         anchors = hold_at if moving is None else _anchors(holds, moving[1], n_fingers, anchor_points)
         contact_changes(positions, old_positions, anchors, result.residual, holds, view, geometry.friction, solver,
-                        within_budget, changes)
+                        within_budget, k < solver.friction_passes, changes)
         if not corrector_continues(within_budget, new_hold, result.changed, solve):
             break
         if moving is not None:
@@ -236,7 +236,7 @@ fraction since the solve (plus Newton's force tolerance)."""
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def contact_changes(positions, old_positions, anchors, residual, holds, view, friction, solver, within_budget,
-                    changes):
+                    settle_friction, changes):
     """The corrector's test after a solve, for rods whose nodes are at ``positions`` (R, N, D) and whose residual
     (R, n) holds the reactions on held DOFs, against the object as each rod sees it (``view``,
     :class:`~..kernels.contact.ObjectView`), with Coulomb friction ``friction`` μ (R,) (:class:`ContactChanges`).
@@ -251,7 +251,8 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
       μ·R_n along that reaction; a sliding node keeps sliding while it has moved from its anchor against its
       friction, which becomes μ·R_n against that motion, and otherwise is ``stuck_again`` where it is.
       Only within the budget (``within_budget``);
-    - ``changed``: rods with any of these, or whose friction moved by more than :data:`FRICTION_TOLERANCE`.
+    - ``changed``: rods with any of these, or, while ``settle_friction``, whose friction moved by more than
+      :data:`FRICTION_TOLERANCE` (:attr:`~..scene.objects.ContactSettings.friction_passes`).
     """
     adhesive, new_hold, changed = changes.adhesive, changes.new_hold, changes.changed
     held, sliding = holds.held, holds.sliding
@@ -332,7 +333,7 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
                 else:
                     changes.friction[r, i, d] = 0.0
                 moved += (changes.friction[r, i, d] - holds.friction[r, i, d]) ** 2
-            if np.sqrt(moved) > FRICTION_TOLERANCE * limit + force_tolerance:
+            if settle_friction and np.sqrt(moved) > FRICTION_TOLERANCE * limit + force_tolerance:
                 changed[r] = True
 
 

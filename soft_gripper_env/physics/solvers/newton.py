@@ -54,6 +54,8 @@ class SolverArrays(NamedTuple):
     """Rods per gripper F."""
     max_corrector_iterations: int
     """Re-solves of one step allowed for new contacts and releases."""
+    friction_passes: int
+    """Re-solves in which a moved friction alone solves again (at most ``max_corrector_iterations``)."""
     first_free_node: int
     """The first node contact is searched for (the clamped nodes belong to the palm)."""
     force_tolerance: float
