@@ -1,10 +1,13 @@
-"""Evaluate a policy on SoftGripperUnderwater-v0 over fixed seeds: success rate, mean return, largest finger force,
+"""Evaluate a policy on SoftGripperUnderwater-v0 over fixed seeds: success rate, mean return, peak finger force,
 and how the episodes ended.
 
-    python -m agents.evaluate --policy ramp|reactive|ppo [--model-dir out/ppo] [--episodes 20] [--seed 1000]
-        [--json FILE]
+    python -m agents.evaluate --policy random|ramp|reactive|pretrained|PATH [--episodes 200] [--seed 1000]
+        [--json FILE] [--model planar|3d]
 
-Every policy sees the same episodes (seeds seed, seed + 1, ...), so their numbers compare directly.
+Episodes use seeds seed, seed + 1, ...: every policy sees the same specimens, currents and gusts, so their numbers
+compare directly. PATH is a folder that ``agents.train_ppo`` wrote (its model and VecNormalize statistics);
+``pretrained`` is the policy shipped in ``agents/pretrained/``. The episodes run batched, ``--num-envs`` at a time,
+each exactly as a single env with its seed would run it.
 """
 
 from __future__ import annotations
@@ -15,27 +18,31 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-import soft_gripper_env
-from agents.scripted import RampPolicy, ReactivePolicy
-from soft_gripper_env.env import observation_slices
+from agents.scripted import RampPolicy, RandomPolicy, ReactivePolicy
+from soft_gripper_env.env import SoftGripperUnderwaterVectorEnv, observation_slices
 from soft_gripper_env.grasp_task import GraspTask
 
-ENDINGS = ("success", "lost", "solver_failure", "not_all_touching", "off_grasp_point", "moving", "held_too_briefly")
+PRETRAINED = Path(__file__).resolve().parent / "pretrained"
+"""The shipped PPO policy: its model and VecNormalize statistics."""
+ENDINGS = ("success", "harmed", "lost", "solver_failure", "not_all_touching", "off_grasp_point", "moving",
+           "not_held_through_gust")
 """How an episode can end, in the order :func:`episode_ending` tests them."""
 
 
 def episode_ending(task: GraspTask, observation: np.ndarray, terminated: bool, info: dict) -> str:
-    """Why an episode ended as it did, from its last observation and info: ``"success"``; ``"lost"`` (terminated:
-    the object beyond ``lost_distance``); ``"solver_failure"``; or, at the time limit, the first condition of a
-    hold that failed there: ``"not_all_touching"`` (a finger pressing less than ``contact_force``),
-    ``"off_grasp_point"`` (farther than ``hold_distance``), ``"moving"`` (faster than ``rest_speed``), else
-    ``"held_too_briefly"`` (held, but for less than ``success_duration``)."""
+    """Why an episode ended as it did, from its last observation and info: ``"success"``; ``"harmed"`` (a finger
+    pressed above the specimen's fragility limit); ``"lost"`` (the object beyond ``lost_distance``);
+    ``"solver_failure"``; or, at the episode's end, the first condition of a hold that failed there:
+    ``"not_all_touching"`` (a finger pressing less than ``contact_force``), ``"off_grasp_point"`` (farther than
+    ``hold_distance``), ``"moving"`` (faster than ``rest_speed``), else ``"not_held_through_gust"`` (held at the
+    end, but not without a break since the gust began)."""
     if info["is_success"]:
         return "success"
+    if info["harmed"]:
+        return "harmed"
     if terminated:
         return "lost"
     if info["solver_failure"]:
@@ -43,88 +50,129 @@ def episode_ending(task: GraspTask, observation: np.ndarray, terminated: bool, i
     if np.any(np.asarray(info["finger_forces_N"]) < task.contact_force):
         return "not_all_touching"
     layout = observation_slices(task)
-    offset = np.asarray(observation[layout["object_position"]], dtype=float) - np.asarray(task.grasp_point)
-    if np.linalg.norm(offset) > task.hold_distance:
+    if np.linalg.norm(np.asarray(observation[layout["object_offset"]], dtype=float)) > task.hold_distance:
         return "off_grasp_point"
     if np.linalg.norm(np.asarray(observation[layout["object_velocity"]], dtype=float)) > task.rest_speed:
         return "moving"
-    return "held_too_briefly"
+    return "not_held_through_gust"
 
 
-def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: int = 1000,
-             progress: bool = True, **settings) -> dict:
-    """Runs ``episodes`` episodes with seeds seed, seed + 1, ...; returns the success rate, mean and standard
-    deviation of the return, the mean episode length, the mean of each episode's largest finger force [N], how
-    many episodes ended each way (:func:`episode_ending`), the wall time [s], and the per-episode outcomes, with the
-    object's final position [m] (world frame, as observed)."""
-    env = gym.make(soft_gripper_env.ENV_ID, **settings)
-    task = env.unwrapped.task
-    layout = observation_slices(task)
-    successes, returns, lengths, forces, endings, positions = [], [], [], [], [], []
+def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: int = 1000, progress: bool = True,
+             num_envs: int = 16, **settings) -> dict:
+    """Runs ``episodes`` episodes with seeds seed, seed + 1, ..., ``num_envs`` at a time (``policy`` acts on a
+    batch of observations); ``settings`` are :class:`~soft_gripper_env.grasp_task.GraspTask` fields. Returns the
+    success rate, mean and standard deviation of the return, the mean episode length, the mean over episodes of
+    the peak finger force [N] (the largest sum of one finger's normal forces, averaged over a control interval),
+    how many episodes ended each way (:func:`episode_ending`), the wall time [s], and per episode: success,
+    return, peak force, ending and the object's final offset from the grasp point [m]."""
+    num_envs = max(1, min(num_envs, episodes))
+    venv = SoftGripperUnderwaterVectorEnv(num_envs, **settings)
+    task = venv.task
+    outcomes: list[tuple[bool, float, int, float, str, list[float]]] = []
     start = time.perf_counter()
-    for k in tqdm(range(episodes), desc="episodes", disable=not progress):
-        obs, info = env.reset(seed=seed + k)
-        total, largest, steps, done = 0.0, 0.0, 0, False
-        while not done:
-            obs, reward, terminated, truncated, info = env.step(policy(obs))
-            total += reward
-            largest = max(largest, float(np.max(info["finger_forces_N"])))
-            steps += 1
-            done = terminated or truncated
-        successes.append(bool(info["is_success"]))
-        endings.append(episode_ending(task, obs, terminated, info))
-        returns.append(total)
-        lengths.append(steps)
-        forces.append(largest)
-        positions.append([float(x) for x in obs[layout["object_position"]]])
+    with tqdm(total=episodes, desc="episodes", unit="episode", disable=not progress) as bar:
+        for first in range(seed, seed + episodes, num_envs):
+            count = min(num_envs, seed + episodes - first)
+            observations, _ = venv.reset(seed=[first + k for k in range(num_envs)])
+            returns, peaks = np.zeros(num_envs), np.zeros(num_envs)
+            lengths = np.zeros(num_envs, dtype=np.int64)
+            running = np.arange(num_envs) < count
+            ended: dict[int, tuple] = {}
+            while running.any():
+                observations, reward, terminated, truncated, info = venv.step(policy(observations))
+                returns[running] += reward[running]
+                lengths[running] += 1
+                peaks[running] = np.maximum(peaks[running], info["finger_forces_N"][running].max(axis=1))
+                for k in np.nonzero(running & (terminated | truncated))[0]:
+                    single = {key: info[key][k] for key in ("is_success", "harmed", "solver_failure",
+                                                            "finger_forces_N")}
+                    offset = observations[k][observation_slices(task)["object_offset"]]
+                    ended[k] = (bool(single["is_success"]), float(returns[k]), int(lengths[k]), float(peaks[k]),
+                                episode_ending(task, observations[k], bool(terminated[k]), single),
+                                [float(x) for x in offset])
+                    running[k] = False
+            outcomes += [ended[k] for k in range(count)]
+            bar.update(count)
     seconds = time.perf_counter() - start
-    env.close()
+    venv.close()
+    successes, returns, lengths, peaks, endings, offsets = (list(column) for column in zip(*outcomes, strict=True))
     return {"episodes": episodes, "first_seed": seed, "success_rate": float(np.mean(successes)),
             "mean_return": float(np.mean(returns)), "std_return": float(np.std(returns)),
-            "mean_length": float(np.mean(lengths)), "mean_largest_finger_force_N": float(np.mean(forces)),
-            "endings": {name: endings.count(name) for name in ENDINGS},
-            "seconds": seconds, "successes": successes, "returns": returns, "largest_finger_forces_N": forces,
-            "episode_endings": endings, "final_object_positions": positions}
+            "mean_length": float(np.mean(lengths)), "mean_peak_contact_force_N": float(np.mean(peaks)),
+            "endings": {name: endings.count(name) for name in ENDINGS}, "seconds": seconds,
+            "successes": successes, "returns": returns, "peak_contact_forces_N": peaks, "episode_endings": endings,
+            "final_object_offsets": offsets}
 
 
 def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
-    """A trained PPO policy with its observation normalisation (both saved by agents/train_ppo.py)."""
+    """A trained PPO policy with its observation normalisation (both saved by agents/train_ppo.py), acting
+    deterministically on one observation or a batch."""
     import pickle
 
     from stable_baselines3 import PPO
 
+    model_dir = Path(model_dir)
+    missing = [name for name in ("ppo_model.zip", "vecnormalize.pkl") if not (model_dir / name).exists()]
+    if missing:
+        raise FileNotFoundError(f"policy folder {model_dir} lacks {', '.join(missing)} (agents.train_ppo --out "
+                                f"writes both)")
     model = PPO.load(model_dir / "ppo_model.zip", device="cpu")
     with open(model_dir / "vecnormalize.pkl", "rb") as f:
         normalize = pickle.load(f)
     normalize.training = False
 
     def act(observation: np.ndarray) -> np.ndarray:
-        action, _ = model.predict(normalize.normalize_obs(observation[None]), deterministic=True)
-        return action[0]
+        observation = np.asarray(observation)
+        batch = observation.reshape(-1, observation.shape[-1])
+        action, _ = model.predict(normalize.normalize_obs(batch), deterministic=True)
+        return action.reshape(observation.shape[:-1] + action.shape[-1:])
 
     return act
 
 
+def make_policy(name: str, task: GraspTask, seed: int) -> Callable[[np.ndarray], np.ndarray]:
+    """``random`` (seeded by ``seed``), ``ramp``, ``reactive``, ``pretrained`` or the path of a trained policy."""
+    if name == "random":
+        return RandomPolicy(task, seed)
+    if name == "ramp":
+        return RampPolicy(task)
+    if name == "reactive":
+        return ReactivePolicy(task)
+    return load_ppo(PRETRAINED if name == "pretrained" else Path(name))
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--policy", choices=("ramp", "reactive", "ppo"), required=True)
-    parser.add_argument("--model-dir", type=Path, default=Path("out") / "ppo", help="where train_ppo.py saved")
-    parser.add_argument("--episodes", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=1000)
-    parser.add_argument("--json", type=Path)
+    parser.add_argument("--policy", required=True, help="random, ramp, reactive, pretrained, or a train_ppo folder")
+    parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument("--seed", type=int, default=1000, help="the first episode's seed")
+    parser.add_argument("--json", type=Path, help="write the results here")
+    parser.add_argument("--model", choices=("planar", "3d"), default="3d", help="rod model (default 3d)")
+    parser.add_argument("--num-envs", type=int, default=16, help="episodes run at a time (default 16)")
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes = {args.episodes} must be at least 1")
-    task = GraspTask()
-    policy = {"ramp": lambda: RampPolicy(task), "reactive": lambda: ReactivePolicy(task),
-              "ppo": lambda: load_ppo(args.model_dir)}[args.policy]()
-    result = evaluate(policy, args.episodes, args.seed)
-    print(f"{args.policy}: success {result['success_rate']:.2f}, return {result['mean_return']:.2f} "
-          f"± {result['std_return']:.2f}, largest finger force {result['mean_largest_finger_force_N']:.2f} N")
+    if args.num_envs < 1:
+        parser.error(f"--num-envs = {args.num_envs} must be at least 1")
+    if args.policy not in ("random", "ramp", "reactive", "pretrained") and not Path(args.policy).is_dir():
+        parser.error(f"--policy = {args.policy!r} is not random, ramp, reactive, pretrained or a folder")
+    task = GraspTask(model=args.model)
+    try:
+        policy = make_policy(args.policy, task, args.seed)
+    except FileNotFoundError as error:
+        parser.error(str(error))
+    result = evaluate(policy, args.episodes, args.seed, num_envs=args.num_envs, model=args.model)
+    result.update(policy=args.policy, model=args.model)
+    print("| policy | model | episodes | success | mean return | mean peak finger force [N] |\n"
+          "|---|---|---|---|---|---|\n"
+          f"| {args.policy} | {args.model} | {args.episodes} (seeds {args.seed}–{args.seed + args.episodes - 1}) | "
+          f"{result['success_rate']:.3f} | {result['mean_return']:.2f} ± {result['std_return']:.2f} | "
+          f"{result['mean_peak_contact_force_N']:.2f} |")
     print("endings: " + ", ".join(f"{name} {count}" for name, count in result["endings"].items() if count))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))
+        print(f"wrote {args.json}")
     return result
 
 

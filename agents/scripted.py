@@ -1,5 +1,5 @@
-"""Scripted policies: the paper's linear κ̄(t) ramp, and a reactive controller that closes each finger quickly until
-it touches and then squeezes by a set curvature.
+"""Scripted policies: the paper's linear κ̄(t) ramp, and a reactive controller that closes each finger until it
+touches and then regulates its force to a fraction of the specimen's fragility limit.
 
 Both act on observations of :class:`soft_gripper_env.env.SoftGripperUnderwaterEnv` and return actions in [−1, 1].
 """
@@ -27,57 +27,87 @@ class RampPolicy:
         if abs(rate) > task.max_curvature_rate:
             raise ValueError(f"rate = {rate!r} 1/s is outside the allowed range [−{task.max_curvature_rate:g}, "
                              f"{task.max_curvature_rate:g}] 1/s of the task's actions")
-        self.action = np.full(task.gripper.n_fingers, rate / task.max_curvature_rate, dtype=np.float32)
+        self.action = np.full(task.gripper.n_fingers, task.action_for_rate(rate), dtype=np.float32)
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
-        return self.action.copy()
+        return np.broadcast_to(self.action, np.shape(observation)[:-1] + self.action.shape).copy()
+
+
+class ConstantPolicy:
+    """The same ``action`` in [−1, 1] on every finger at every step: the open-loop check that the task needs
+    feedback."""
+
+    def __init__(self, task: GraspTask | None = None, action: float = 0.0) -> None:
+        task = task or GraspTask()
+        check_range("ConstantPolicy", "action", action, "(dimensionless)", -1.0, 1.0, low_inclusive=True,
+                    high_inclusive=True)
+        self.action = np.full(task.gripper.n_fingers, action, dtype=np.float32)
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(self.action, np.shape(observation)[:-1] + self.action.shape).copy()
+
+
+class RandomPolicy:
+    """Actions drawn uniformly from [−1, 1] on every finger at every step, by a generator seeded with ``seed``."""
+
+    def __init__(self, task: GraspTask | None = None, seed: int | None = None) -> None:
+        self.n_fingers = (task or GraspTask()).gripper.n_fingers
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        return self.rng.uniform(-1.0, 1.0, np.shape(observation)[:-1] + (self.n_fingers,)).astype(np.float32)
 
 
 class ReactivePolicy:
-    """Closing with contact feedback, finger by finger. Each finger closes at ``approach_rate`` [1/s] until it
-    touches the object (its normal reactions sum to at least ``touch_force`` [N]), and then waits. Once all of them
-    touch, the object is caged: each finger presses on to ``squeeze`` (dimensionless) below the natural curvature at
-    which it touched, at no more than ``press_rate`` [1/s], and holds there.
+    """Closing with force feedback, finger by finger, to a grip that respects the specimen's fragility limit.
 
-    The squeeze is set in curvature, not in force: stick contact makes a finger's force jump from one control
-    interval to the next, and a controller chasing it loosens and tightens the grip in turn, while a fixed
-    curvature past the touch holds a steady, moderate preload (a few newtons at most, against the ramp's ten or
-    more). The policy remembers the touch curvatures of the episode it is acting in; an observation with κ̄ = 0 on
-    every finger (every episode starts straight) begins a new one. It acts on one observation (obs_dim,) or a batch
-    (B, obs_dim), as from a vector of environments; a batch's row k is always episode slot k.
+    - **Approach.** A finger that does not touch closes at ``approach_rate`` [1/s], slowing within ``slow_gap``
+      [m] of the specimen in proportion to its gap, to no less than ``slowest`` times that rate: a fast touch
+      presses harder than a slow one.
+    - **Cage.** A finger that touches waits for the others, backing off only if it presses above its target.
+    - **Grip.** Once every finger touches, each regulates its force F to a target of ``grip`` times the specimen's
+      fragility limit F_max (observed), ``gust_grip`` times it while a gust may blow (the task's window of gust
+      times, read from the episode fraction). Its curvature rate is ``gain`` × ``max_curvature_rate`` ×
+      (F − target)/target [1/s], at most ``press_rate`` either way: a grip's force follows κ̄ steeply.
+    - A finger that loses its touch closes again.
+
+    The policy keeps no state: it acts on one observation (obs_dim,) or a batch (B, obs_dim), as from a vector of
+    envs.
     """
 
-    def __init__(self, task: GraspTask | None = None, touch_force: float = 0.01, squeeze: float = 0.015,
-                 press_rate: float = 0.05, approach_rate: float = APPROACH_RATE) -> None:
+    def __init__(self, task: GraspTask | None = None, grip: float = 0.3, gust_grip: float = 0.4, gain: float = 0.2,
+                 press_rate: float = 0.02, approach_rate: float = APPROACH_RATE, slow_gap: float = 0.02,
+                 slowest: float = 0.2) -> None:
         self.task = task or GraspTask()
         check_range("ReactivePolicy", "approach_rate", approach_rate, "1/s", -self.task.max_curvature_rate, 0.0,
                     low_inclusive=True)
-        check_range("ReactivePolicy", "touch_force", touch_force, "N", 0.0, 100.0)
-        check_range("ReactivePolicy", "squeeze", squeeze, "(dimensionless)", 0.0, -self.task.curvature_range[0],
-                    low_inclusive=True)
-        check_range("ReactivePolicy", "press_rate", press_rate, "1/s", 0.0, self.task.max_curvature_rate)
-        self.touch_force, self.squeeze, self.press_rate = touch_force, squeeze, press_rate
+        check_range("ReactivePolicy", "grip", grip, "(dimensionless)", 0.0, 1.0)
+        check_range("ReactivePolicy", "gain", gain, "(dimensionless)", 0.0, 100.0)
+        check_range("ReactivePolicy", "press_rate", press_rate, "1/s", 0.0, self.task.max_curvature_rate,
+                    high_inclusive=True)
+        check_range("ReactivePolicy", "slow_gap", slow_gap, "m", 0.0, 1.0, low_inclusive=True)
+        check_range("ReactivePolicy", "slowest", slowest, "(dimensionless)", 0.0, 1.0, high_inclusive=True)
+        check_range("ReactivePolicy", "gust_grip", gust_grip, "(dimensionless)", 0.0, 1.0)
+        self.grip, self.gust_grip, self.gain, self.slow_gap, self.slowest = grip, gust_grip, gain, slow_gap, slowest
+        window = np.array([self.task.gust_start[0], self.task.gust_start[1] + self.task.gust_duration])
+        self._gust_window = window / self.task.episode_duration  # episode fractions in which a gust may blow
+        self._press, self._approach = press_rate, approach_rate
         layout = observation_slices(self.task)
-        self._forces, self._curvature = layout["normal_forces"], layout["natural_curvature"]
-        self._approach_action = approach_rate / self.task.max_curvature_rate
-        self._n_fingers = self.task.gripper.n_fingers
-        self._touched_at = np.full((0, self._n_fingers), np.nan)  # κ̄ at which each finger first touched; NaN: not yet
+        self._forces, self._touching, self._limit = layout["finger_forces"], layout["touching"], layout["fragile_force"]
+        self._gaps, self._fraction = layout["finger_gaps"], layout["episode_fraction"]
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         observation = np.asarray(observation)
-        batch = observation.reshape(-1, observation.shape[-1])
-        force = batch[:, self._forces].reshape(len(batch), self._n_fingers, -1).sum(axis=-1)
-        curvature = batch[:, self._curvature].astype(float)
-        if len(self._touched_at) != len(batch):
-            self._touched_at = np.full((len(batch), self._n_fingers), np.nan)
-        self._touched_at[(curvature == 0.0).all(axis=1)] = np.nan  # a new episode
-        touching = np.isnan(self._touched_at) & (force >= self.touch_force)
-        self._touched_at[touching] = curvature[touching]
-        touched = ~np.isnan(self._touched_at)
-        caged = touched.all(axis=1, keepdims=True)
-        # the action that reaches the target within one control interval, at most the press rate
-        per_action = self.task.max_curvature_rate * self.task.control_dt
-        limit = self.press_rate / self.task.max_curvature_rate
-        press = np.clip((self._touched_at - self.squeeze - curvature) / per_action, -limit, limit)
-        action = np.where(~touched, self._approach_action, np.where(caged, press, 0.0))
-        return action.astype(np.float32).reshape(observation.shape[:-1] + (self._n_fingers,))
+        batch = observation.reshape(-1, observation.shape[-1]).astype(float)
+        force, touching = batch[:, self._forces], batch[:, self._touching] > 0.5
+        fraction = batch[:, self._fraction]
+        gusty = (fraction >= self._gust_window[0] - 0.05) & (fraction <= self._gust_window[1])
+        target = np.maximum(np.where(gusty, self.gust_grip, self.grip) * batch[:, self._limit], 1e-9)  # [N]
+        regulate = np.clip(-self.gain * self.task.max_curvature_rate * (target - force) / target, -self._press,
+                           self._press)  # [1/s]
+        waiting = np.maximum(regulate, 0.0)  # a touching finger only backs off while the others close
+        caged = touching.all(axis=1, keepdims=True)
+        near = np.clip(batch[:, self._gaps] / self.slow_gap, self.slowest, 1.0) if self.slow_gap > 0 else 1.0
+        rate = np.where(~touching, self._approach * near, np.where(caged, regulate, waiting))
+        shape = observation.shape[:-1] + (self.task.gripper.n_fingers,)
+        return self.task.action_for_rate(rate).astype(np.float32).reshape(shape)

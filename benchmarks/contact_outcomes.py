@@ -33,14 +33,15 @@ def run_pair(model: str, policy: str, episodes: int, seed: int, **settings) -> d
     task = GraspTask(model=model, **settings)
     controller = RampPolicy(task) if policy == "ramp" else ReactivePolicy(task)
     evaluate(controller, 1, seed, progress=False, model=model, **settings)  # compiles (or loads) the kernels, untimed
-    return evaluate(controller, episodes, seed, progress=False, model=model, **settings)
+    result = evaluate(controller, episodes, seed, progress=False, model=model, **settings)
+    return {**result, "task": repr(task)}  # what the episodes ran, so that a kept run of another task is not reused
 
 
 def agreement(first: dict, second: dict) -> dict:
     """How two runs' episodes on the same seeds compare, seed by seed: the share with the same success label, and
     the median and 90th percentile of the distance between the objects' final positions [m]."""
     same = np.mean(np.equal(first["successes"], second["successes"]))
-    gap = np.linalg.norm(np.subtract(first["final_object_positions"], second["final_object_positions"]), axis=1)
+    gap = np.linalg.norm(np.subtract(first["final_object_offsets"], second["final_object_offsets"]), axis=1)
     return {"label_agreement": float(same), "median_position_gap_m": float(np.median(gap)),
             "p90_position_gap_m": float(np.percentile(gap, 90))}
 
@@ -78,12 +79,12 @@ def main(argv: list[str] | None = None) -> dict:
     for (model, policy), result in results.items():
         steps = result["mean_length"] * result["episodes"]
         row = {key: result[key] for key in ("success_rate", "mean_return", "std_return",
-                                             "mean_largest_finger_force_N", "endings", "seconds")}
+                                             "mean_peak_contact_force_N", "endings", "seconds")}
         row["ms_per_step"] = 1e3 * result["seconds"] / steps
         summary["runs"][f"{model}/{policy}"] = row
         endings = ", ".join(f"{name} {count}" for name, count in result["endings"].items() if count)
         print(f"| {model} | {policy} | {row['success_rate']:.2f} | {row['mean_return']:.1f} ± {row['std_return']:.1f}"
-              f" | {row['mean_largest_finger_force_N']:.2f} | {result['endings']['solver_failure']} |"
+              f" | {row['mean_peak_contact_force_N']:.2f} | {result['endings']['solver_failure']} |"
               f" {row['ms_per_step']:.2f} | {endings} |")
     print("\n| controller | success labels agree | median final position gap [mm] | 90th percentile [mm] |\n"
           "|---|---|---|---|")
@@ -94,8 +95,8 @@ def main(argv: list[str] | None = None) -> dict:
               f" {1e3 * agree['p90_position_gap_m']:.1f} |")
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps({"summary": summary, "episodes": {
-        f"{m}/{p}": {k: r[k] for k in ("successes", "returns", "largest_finger_forces_N", "episode_endings",
-                                        "final_object_positions")} for (m, p), r in results.items()}}, indent=1))
+        f"{m}/{p}": {k: r[k] for k in ("successes", "returns", "peak_contact_forces_N", "episode_endings",
+                                        "final_object_offsets")} for (m, p), r in results.items()}}, indent=1))
     print(f"wrote {args.json}")
     _plot(results, args.plot)
     return summary
@@ -112,7 +113,7 @@ def _plot(results: dict, path: Path) -> None:
     for ax, policy in zip(axes[0], POLICIES, strict=True):
         for model, marker in zip(MODELS, ("o", "x"), strict=True):
             result = results[(model, policy)]
-            xyz = np.array(result["final_object_positions"])
+            xyz = np.array(result["final_object_offsets"])
             success = np.array(result["successes"])
             ax.scatter(xyz[success, 0] * 1e3, xyz[success, 2] * 1e3, marker=marker, s=14, label=f"{model}, held")
             ax.scatter(xyz[~success, 0] * 1e3, xyz[~success, 2] * 1e3, marker=marker, s=14, alpha=0.4,

@@ -355,13 +355,13 @@ def summarize_outcomes(results: dict, speeds: dict, episodes: int, seed: int) ->
             reference = results[(OUTCOME_REFERENCE, policy)]
             agree = agreement(result, reference)
             held = np.asarray(reference["successes"], dtype=bool)
-            gap = np.linalg.norm(np.subtract(result["final_object_positions"], reference["final_object_positions"]),
+            gap = np.linalg.norm(np.subtract(result["final_object_offsets"], reference["final_object_offsets"]),
                                  axis=1)
             agree["median_position_gap_where_reference_holds_m"] = float(np.median(gap[held])) if held.any() else None
             row["controllers"][policy] = {**agree, "success_rate": result["success_rate"],
                                           "solver_failures": result["endings"]["solver_failure"],
                                           "successes": result["successes"],
-                                          "final_object_positions": result["final_object_positions"]}
+                                          "final_object_offsets": result["final_object_offsets"]}
             print(f"| {label} | {policy} | {result['success_rate']:.2f} | {agree['label_agreement']:.3f} |"
                   f" {1e3 * agree['median_position_gap_m']:.2f} | {1e3 * agree['p90_position_gap_m']:.1f} |"
                   f" {_millimetres(agree['median_position_gap_where_reference_holds_m'])} |"
@@ -424,12 +424,15 @@ def _run_name(job: tuple[str, str]) -> str:
 
 
 def _kept_run(runs: Path, job: tuple[str, str], episodes: int, seed: int) -> dict | None:
-    """An earlier call's run of ``job`` on the same seeds, if kept."""
+    """An earlier call's run of ``job`` on the same seeds and the same task, if kept."""
+    from soft_gripper_env.grasp_task import GraspTask
+
     path = runs / _run_name(job)
     if not path.exists():
         return None
     kept = json.loads(path.read_text())
-    return kept if (kept.get("episodes"), kept.get("first_seed")) == (episodes, seed) else None
+    task = repr(GraspTask(model=OUTCOME_SETTINGS[job[0]]["model"], **_task_fields(job[0])))
+    return kept if (kept.get("episodes"), kept.get("first_seed"), kept.get("task")) == (episodes, seed, task) else None
 
 
 def _describe(label: str) -> dict:

@@ -77,13 +77,13 @@ def _cantilever(out: dict, quick: bool) -> None:
 
 
 def _free_sphere_batch(out: dict, quick: bool) -> None:
-    from soft_gripper_env.grasp_task import GraspTask, task_scene
+    from soft_gripper_env.grasp_task import GraspTask, task_episode
     from soft_gripper_env.physics import Simulator
 
     for model in ("planar", "3d"):
         task = GraspTask(model=model)
         rng = np.random.default_rng(7)
-        scenes = [task_scene(task, rng, {}) for _ in range(4)]
+        scenes = [task_episode(task, rng, {}).scene for _ in range(4)]
         sim = Simulator(scenes)
         state = sim.initial_state()
         kbar = np.zeros((4, 3))

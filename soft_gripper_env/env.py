@@ -13,10 +13,10 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .grasp_task import GraspBatch, GraspTask, check_options, task_scene
+from .grasp_task import OPTION_RANGES, GraspBatch, GraspTask, check_options, task_episode
 
-DEFAULT_MAX_EPISODE_STEPS = 60
-"""Episode length of the registered environment: 60 actions of 0.05 s, 3 s."""
+DEFAULT_MAX_EPISODE_STEPS = GraspTask().max_episode_steps
+"""Episode length of the registered environment: the default task's 4 s, 80 actions of 0.05 s."""
 _POSITION_BOUND = 0.5  # [m]; no node of a 0.2 m finger clamped at the palm gets farther
 _VELOCITY_BOUND = 10.0  # [m/s]
 _FORCE_BOUND = 100.0  # [N]
@@ -28,8 +28,10 @@ def observation_slices(task: GraspTask) -> dict[str, slice]:
     dim = 2 if task.model == "planar" else 3
     n_fingers, n_nodes = task.gripper.n_fingers, task.gripper.finger.n_nodes
     sizes = {"node_positions": n_fingers * n_nodes * dim, "node_velocities": n_fingers * n_nodes * dim,
-             "natural_curvature": n_fingers, "normal_forces": n_fingers * n_nodes, "object_position": 3,
-             "object_velocity": 3}
+             "natural_curvature": n_fingers, "normal_forces": n_fingers * n_nodes, "finger_forces": n_fingers,
+             "finger_gaps": n_fingers, "touching": n_fingers, "fragile_force": 1, "object_radius": 1,
+             "object_offset": 3,
+             "object_velocity": 3, "episode_fraction": 1}
     ends = np.cumsum(list(sizes.values()))
     return {name: slice(int(end - size), int(end)) for (name, size), end in zip(sizes.items(), ends, strict=True)}
 
@@ -41,10 +43,15 @@ def observation_bounds(task: GraspTask) -> tuple[np.ndarray, np.ndarray]:
     nodes = n_fingers * n_nodes * dim
     low = np.concatenate([np.full(nodes, -_POSITION_BOUND), np.full(nodes, -_VELOCITY_BOUND),
                           np.full(n_fingers, task.curvature_range[0]), np.zeros(n_fingers * n_nodes),
-                          np.full(3, -_OBJECT_BOUND), np.full(3, -_VELOCITY_BOUND)])
+                          np.zeros(3 * n_fingers), [OPTION_RANGES["fragile_force"][0]],
+                          [OPTION_RANGES["object_radius"][0]], np.full(3, -_OBJECT_BOUND), np.full(3, -_VELOCITY_BOUND),
+                          [0.0]])
     high = np.concatenate([np.full(nodes, _POSITION_BOUND), np.full(nodes, _VELOCITY_BOUND),
                            np.full(n_fingers, task.curvature_range[1]), np.full(n_fingers * n_nodes, _FORCE_BOUND),
-                           np.full(3, _OBJECT_BOUND), np.full(3, _VELOCITY_BOUND)])
+                           np.full(n_fingers, _FORCE_BOUND), np.full(n_fingers, _OBJECT_BOUND), np.ones(n_fingers),
+                           [OPTION_RANGES["fragile_force"][1]],
+                           [OPTION_RANGES["object_radius"][1]], np.full(3, _OBJECT_BOUND), np.full(3, _VELOCITY_BOUND),
+                           [1.0]])
     return low.astype(np.float32), high.astype(np.float32)
 
 
@@ -72,6 +79,8 @@ def _infos(batch: GraspBatch, terms: dict[str, np.ndarray], failure: np.ndarray)
     return {
         "reward_terms": terms,
         "is_success": batch.is_success.copy(),
+        "harmed": batch.harmed.copy(),
+        "fragile_force_N": batch.fragile_force.copy(),
         "solver_failure": failure.copy(),
         "hold_time_s": batch.hold_time.copy(),
         "finger_forces_N": batch.finger_force.copy(),
@@ -82,82 +91,103 @@ def _infos(batch: GraspBatch, terms: dict[str, np.ndarray], failure: np.ndarray)
 
 
 def _zero_terms(batch_size: int) -> dict[str, np.ndarray]:
-    return {name: np.zeros(batch_size) for name in ("reach", "contact", "hold", "rest", "overload", "effort")}
+    return {name: np.zeros(batch_size) for name in ("reach", "contact", "hold", "rest", "pressure", "effort", "harm",
+                                                     "success")}
 
 
 class SoftGripperUnderwaterEnv(gym.Env):
-    """Three soft pneumatic fingers grasp a delicate, near-neutrally buoyant sphere in a weak, changing current.
+    """Three soft pneumatic fingers take a delicate, near-neutrally buoyant specimen (a sphere) in moving water
+    without harming it, and hold it through a gust.
 
     The fingers are discrete elastic rods (the paper's gripper: L = 0.2 m, r = 0.02 m, 20 nodes, Elastosil) in water
-    (Morison drag, added mass, buoyancy), stepped implicitly every ``physics_dt``. The sphere is a free rigid body
-    under gravity, buoyancy, drag and added mass, coupled implicitly to the fingers by stick contact. Settings are
-    the fields of :class:`~soft_gripper_env.grasp_task.GraspTask`, as keyword arguments:
-    ``gym.make("SoftGripperUnderwater-v0", model="3d", control_dt=0.1)``.
+    (Morison drag, added mass, buoyancy), stepped implicitly every ``physics_dt``. The specimen is a free rigid body
+    under gravity, buoyancy, drag and added mass, coupled implicitly to the fingers by contact with Coulomb friction.
+    Settings are the fields of :class:`~soft_gripper_env.grasp_task.GraspTask`, as keyword arguments:
+    ``gym.make("SoftGripperUnderwater-v0", model="planar", control_dt=0.1)``.
 
     **Action** ``Box(-1, 1, (F,), float32)``, F = 3 fingers for the paper's gripper (``GraspTask.gripper``)
 
-    ======  =========================================================  =====
-    index   meaning                                                    unit
-    ======  =========================================================  =====
-    0–F−1   natural-curvature rate of finger k, × ``max_curvature_rate`` 1/s
-            (0.5 1/s); negative closes the finger
-    ======  =========================================================  =====
+    ======  ===========================================================================  =====
+    index   meaning                                                                      unit
+    ======  ===========================================================================  =====
+    0–F−1   natural-curvature rate of finger k: ``max_curvature_rate`` (0.5 1/s) ×         1/s
+            sign(a)·|a|³ (``action_exponent``); negative closes the finger
+    ======  ===========================================================================  =====
 
-    κ̄ is integrated every physics step and saturates at ``curvature_range`` (−0.2 to 0: the maximum pressure, which
-    curls a finger's natural shape through about 205°, and no pressure). Finite values outside [−1, 1] are clipped.
-    NaN, inf, a wrong shape or a non-numeric action raise ``ValueError``.
+    The cubic map gives fine rates near zero, where a grip is held (a κ̄ change of 0.001 presses about 0.2 N
+    harder), and fast closing at |a| near 1. κ̄ is integrated every physics step and saturates at
+    ``curvature_range`` (−0.2 to 0: the maximum pressure, which curls a finger's natural shape through about 205°,
+    and no pressure). Finite values outside [−1, 1] are clipped. NaN, inf, a wrong shape or a non-numeric action
+    raise ``ValueError``.
 
     **Observation** ``Box(float32)``, in this order (F fingers of N nodes, 3 and 20 for the paper's gripper; D = 2
     for the planar model, where positions are (s, z) in each finger's vertical plane, s along the finger's direction
     from the palm centre; D = 3 in 3-D, world (x, y, z)):
 
-    ===============  ==========  ====================================================  ======  ==============
-    part             size        meaning                                               unit    bounds
-    ===============  ==========  ====================================================  ======  ==============
-    node positions   F·N·D       every node of every finger                            m       ±0.5
-    node velocities  F·N·D       their velocities                                      m/s     ±10
-    κ̄               F           present natural curvature per finger                  1       curvature_range
-    normal forces    F·N         compressive reaction of the object on each node,     N       0 … 100
-                                 mean over the last control interval
-    object position  3           sphere centre relative to the palm centre (world)     m       ±1
-    object velocity  3           sphere velocity relative to the palm (world)          m/s     ±10
-    ===============  ==========  ====================================================  ======  ==============
+    ================  ==========  ===================================================  ======  ===============
+    part              size        meaning                                              unit    bounds
+    ================  ==========  ===================================================  ======  ===============
+    node positions    F·N·D       every node of every finger                           m       ±0.5
+    node velocities   F·N·D       their velocities                                     m/s     ±10
+    κ̄                F           present natural curvature per finger                 1       curvature_range
+    normal forces     F·N         compressive reaction of the specimen on each node,   N       0 … 100
+                                  mean over the last control interval
+    finger forces     F           their sum per finger                                 N       0 … 100
+    finger gaps       F           distance from each finger's surface to the           m       0 … 1
+                                  specimen's, at its nearest node (proximity sensing)
+    touching          F           1 where a finger's sustained force is at least       1       0 … 1
+                                  ``contact_force``
+    fragility limit   1           the specimen's limit (a gripper is told what it is   N       0.01 … 100
+                                  sent to take)
+    specimen radius   1           (seen by the gripper's camera)                       m       0.01 … 0.09
+    specimen offset   3           its centre relative to the grasp point (world)       m       ±1
+    specimen velocity 3           relative to the palm (world)                         m/s     ±10
+    episode fraction  1           elapsed time over ``episode_duration``               1       0 … 1
+    ================  ==========  ===================================================  ======  ===============
 
-    Sizes with the paper's gripper: 309 (planar), 429 (3-D). Values are clipped to the bounds, which only a failing
-    solve could reach.
+    Values are clipped to the bounds, which only a failing solve could reach.
+
+    **Episode.** Each reset draws (by ``self.np_random``) the specimen's radius (0.045–0.06 m), density (990–1030
+    kg/m³), fragility limit (1–4 N) and start (``start_point`` (0.0, 0.0, −0.1) m ± (0.015, 0.015, 0.01) m, below
+    the open fingers); a horizontal current (mean 0–0.02 m/s and an oscillation of 0–0.02 m/s with a period of 1–3 s, in
+    random directions and phase); and a gust, a smooth horizontal pulse of 0.05–0.15 m/s peak in a random direction
+    that begins between 2 and 2.5 s and lasts 0.5 s. ``reset(options=...)`` fixes any of them: ``object_radius``
+    [m], ``object_density`` [kg/m³], ``fragile_force`` [N], ``object_offset`` (3,) [m], ``current_velocity`` (3,)
+    and ``current_oscillation`` (3,) [m/s], ``current_period`` [s], ``current_phase`` [rad], ``gust_velocity``
+    (3,) [m/s] and ``gust_start`` [s]; and ``scene="paper"`` gives the paper's exact scene (its fixed ball, Stokes
+    drag, no buoyancy, no gust, nothing fragile) for validation. An unknown key or a value out of its range raises
+    ``ValueError``.
+
+    * **Held**: every finger touching (a sustained force of at least ``contact_force``, 0.01 N: the finger's force
+      through a low-pass filter of 0.2 s, ``sustained_force_time``), the specimen's centre within 0.05 m of the
+      grasp point (0.0, 0.0, −0.09) and slower than 0.05 m/s. ``info["is_success"]``: never harmed; every finger
+      touching when the gust began and the specimen within ``hold_distance`` of the grasp point from then on; the
+      gust passed; and held for the last 1 s without a break. SB3 reads it at the episode's end.
+    * ``terminated``: the specimen is harmed (a finger's sustained force above its fragility limit;
+      ``info["harmed"]``) or lost (more than 0.15 m from the grasp point).
+    * ``truncated``: the episode's end (``episode_duration`` = 4 s, 80 actions; also the registered time limit), or
+      a physics step whose Newton solve failed even after halving (``info["solver_failure"] = True``; the state is
+      the last good one, so observations are never NaN). A solver failure is neither the policy's success nor its
+      fault, so it truncates rather than terminates.
 
     **Reward** (weights in :class:`~soft_gripper_env.grasp_task.RewardWeights`; every term is in
-    ``info["reward_terms"]``, and they sum to the reward):
+    ``info["reward_terms"]``, and they sum to the reward). Per step:
 
-    =========  ===========================================================================  =============
-    term       value                                                                        range
-    =========  ===========================================================================  =============
-    reach      0.25 × mean over fingers of 1 − tanh(gap / 0.05 m), the gap from a finger's   [0, 0.25]
-               nearest node to the sphere's surface
-    contact    0.25 × fraction of fingers in compressive contact (Σ normal force ≥ 0.01 N)   [0, 0.25]
-    hold       1.0 × (1 − tanh(d / 0.03 m)), d the distance to the grasp point (0, 0, −0.1)  [0, 1]
-               m; only while all three fingers touch
-    rest       0.5 × (1 − tanh(|v| / 0.05 m/s)); only while all three fingers touch          [0, 0.5]
-    overload   −1.0 × tanh(excess / 0.5 N), excess of the largest finger force over the     [−1, 0]
-               fragility threshold 0.5 N
-    effort     −0.05 × mean(action²)                                                        [−0.05, 0]
-    =========  ===========================================================================  =============
+    ========  ===========================================================================  =============
+    term      value                                                                        range
+    ========  ===========================================================================  =============
+    reach     0.25 × mean over fingers of 1 − tanh(gap / 0.05 m)                           [0, 0.25]
+    contact   0.25 × fraction of fingers touching                                          [0, 0.25]
+    hold      1.0 × (1 − tanh(d / 0.03 m)), d the distance to the grasp point; only while  [0, 1]
+              every finger touches
+    rest      0.5 × (1 − tanh(|v| / 0.05 m/s)); only while every finger touches             [0, 0.5]
+    pressure  −0.5 × clip((F/F_max − 0.7)/0.3, 0, 1), F the largest sustained finger       [−0.5, 0]
+              force, F_max the fragility limit: a warning from 70 % of the limit on
+    effort    −0.05 × mean(action²)                                                        [−0.05, 0]
+    ========  ===========================================================================  =============
 
-    **Episode.** Each reset draws (by ``self.np_random``) the sphere's radius (0.04–0.06 m), density (990–1030
-    kg/m³) and start (grasp point ± (0.015, 0.015, 0.01) m), and a horizontal current: mean 0–0.02 m/s and an
-    oscillation of 0–0.02 m/s with a period of 1–3 s, in random directions and phase. ``reset(options=...)`` fixes
-    any of them: ``object_radius`` [m], ``object_density`` [kg/m³], ``object_offset`` (3,) [m],
-    ``current_velocity`` (3,) and ``current_oscillation`` (3,) [m/s], ``current_period`` [s], ``current_phase``
-    [rad]; and ``scene="paper"`` gives the paper's exact scene (its fixed ball, Stokes drag, no buoyancy) for
-    validation. An unknown key or a value out of its range raises ``ValueError``.
-
-    * ``info["is_success"]``: the object has been held — all three fingers in compressive contact, its centre within
-      0.03 m of the grasp point and slower than 0.05 m/s — for the last 1 s without a break.
-    * ``terminated``: the object is lost, more than 0.15 m from the grasp point.
-    * ``truncated``: the time limit (``max_episode_steps``, 60 steps = 3 s when made by ``gym.make``), or a physics
-      step whose Newton solve failed even after halving (``info["solver_failure"] = True``; the state is the last
-      good one, so observations are never NaN). A solver failure is neither the policy's success nor its fault,
-      so it truncates rather than terminates.
+    Once: ``harm`` −20 at the step that harms the specimen (the episode ends there), ``success`` +20 at the last
+    step of a successful episode. Every penalty is for something success forbids or warns of it.
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 20}
@@ -178,8 +208,7 @@ class SoftGripperUnderwaterEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         options = check_options(options)
-        scene = task_scene(self.task, self.np_random, options)
-        self._batch.reset([0], [scene], options.get("scene", "task"))
+        self._batch.reset([0], [task_episode(self.task, self.np_random, options)], options.get("scene", "task"))
         info = _single(_infos(self._batch, _zero_terms(1), np.zeros(1, dtype=bool)))
         if self.render_mode == "human":
             self.render()
@@ -194,7 +223,7 @@ class SoftGripperUnderwaterEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return (_observations(self._batch, self._low, self._high)[0], float(outcome.reward[0]),
-                bool(outcome.terminated[0]), bool(outcome.solver_failure[0]), info)
+                bool(outcome.terminated[0]), bool(outcome.truncated[0]), info)
 
     def render(self):
         if self.render_mode is None:
@@ -364,8 +393,7 @@ class _Shard:
         return _observations(self.batch, self.low, self.high), infos
 
     def _reset_envs(self, indices: np.ndarray, options: dict) -> None:
-        scenes = [task_scene(self.task, self.rngs[i], options) for i in indices]
-        self.batch.reset(indices, scenes, "task")
+        self.batch.reset(indices, [task_episode(self.task, self.rngs[i], options) for i in indices], "task")
         self.steps[indices] = 0
 
     def reset_done(self) -> np.ndarray:
@@ -380,7 +408,7 @@ class _Shard:
         outcome = self.batch.step(actions, active)
         self.steps[active] += 1
         terminated = outcome.terminated.copy()
-        truncated = active & (outcome.solver_failure | (self.steps >= self.max_episode_steps))
+        truncated = outcome.truncated | (active & ~terminated & (self.steps >= self.max_episode_steps))
         reward = outcome.reward.copy()
         terms = outcome.reward_terms
         restarting = np.nonzero(self.autoreset)[0]

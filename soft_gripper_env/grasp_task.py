@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -39,7 +40,9 @@ MODELS = ("planar", "3d")
 @dataclass(frozen=True)
 class RewardWeights:
     """Scale of each reward term (dimensionless). Each term is bounded: the positive ones lie in [0, weight], the
-    penalties in [−weight, 0]."""
+    penalties in [−weight, 0]. The per-step terms sum to at most 2 per action; the two once-per-episode terms
+    (``harm`` and ``success``) are as large as ten such steps, so that ending harmed or succeeding outweighs the
+    steps a policy spends on the way."""
 
     reach: float = 0.25
     """Fingers near the object, 1 − tanh(gap/reach_distance) averaged over the fingers, the gap being the
@@ -50,10 +53,16 @@ class RewardWeights:
     """Object near the grasp point, 1 − tanh(d/hold_distance); only while every finger touches it."""
     rest: float = 0.5
     """Object at rest relative to the palm, 1 − tanh(|v|/rest_speed); only while every finger touches it."""
-    overload: float = 1.0
-    """Penalty tanh(excess/fragile_force) for the largest finger force above ``fragile_force``."""
+    pressure: float = 0.5
+    """Penalty for pressing near the specimen's fragility limit: the largest finger force F over the limit F_max,
+    clip((F/F_max − 0.7)/0.3, 0, 1), zero up to 70 % of the limit and the full weight at it. Success forbids only
+    F > F_max; this warns before it, so that a policy learns the margin and not the edge."""
     effort: float = 0.05
     """Penalty mean(action²)."""
+    harm: float = 20.0
+    """Penalty, once, when a finger presses above the specimen's fragility limit (the episode ends there)."""
+    success: float = 20.0
+    """Bonus, once, at the episode's last step if it succeeded."""
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -88,11 +97,16 @@ class GraspTask:
     reference's on 96.5–97.5 % of 200 seeds, 1.9–2.8 mm apart (``docs/speed_vs_error.md``)."""
     max_curvature_rate: float = 0.5
     """Natural-curvature rate of an action of ±1 [1/s] (κ̄ per node at the gripper's 20 nodes per finger)."""
+    action_exponent: float = 3.0
+    """An action a in [−1, 1] sets the rate max_curvature_rate·sign(a)·|a|^p, p this exponent (dimensionless,
+    ≥ 1): a grip's force follows κ̄ steeply (a κ̄ change of 0.001 presses about 0.2 N harder), so holding a fragile
+    specimen needs rates a hundredth of the closing rate's, and with p = 3 they lie at |a| ≈ 0.3 and not 0.04,
+    where an exploring policy's noise of a few tenths would crush it."""
     curvature_range: tuple[float, float] = (-0.2, 0.0)
     """Range of κ̄ (dimensionless) the actuators reach: κ̄ saturates there, as a pneumatic finger saturates at its
     maximum pressure (−0.2: each finger's natural shape curls through about 205°) and is straight without
     pressure."""
-    object_radius: tuple[float, float] = (0.04, 0.06)
+    object_radius: tuple[float, float] = (0.045, 0.06)
     """Radius of the sphere [m]."""
     object_density: tuple[float, float] = (990.0, 1030.0)
     """Density of the sphere [kg/m³]: near-neutrally buoyant, as soft underwater specimens are, within −1 … +3 % of
@@ -100,10 +114,15 @@ class GraspTask:
     object_friction: float = DEFAULT_FRICTION
     """Coulomb friction coefficient μ between the fingers (and the palm) and the sphere (dimensionless; 0.3, silicone
     on a wet object, ``docs/contact.md``); ``math.inf`` makes every contact stick."""
-    grasp_point: tuple[float, float, float] = (0.0, 0.0, -0.1)
-    """Where a grasped object should sit, relative to the palm centre [m]."""
+    grasp_point: tuple[float, float, float] = (0.0, 0.0, -0.09)
+    """Where a grasped object should sit, relative to the palm centre [m]: the middle of where the closed fingers
+    cage a sphere of the task's sizes, from up against the finger roots (z ≈ −0.07 m) to cradled by the fingertips
+    (z ≈ −0.13 m for the largest)."""
+    start_point: tuple[float, float, float] = (0.0, 0.0, -0.1)
+    """Where the sphere starts, before the offset, relative to the palm centre [m]: below the open fingers (they
+    lie straight out in the palm's plane, 0.02 m thick), 1 cm clear of them at the largest radius and offset."""
     object_offset: tuple[float, float, float] = (0.015, 0.015, 0.01)
-    """The sphere starts at the grasp point plus an offset drawn from ±these per axis [m]."""
+    """The sphere starts at ``start_point`` plus an offset drawn from ±these per axis [m]."""
     current_speed: tuple[float, float] = (0.0, 0.02)
     """Speed of the mean current, horizontal, in a random direction [m/s]."""
     current_oscillation: tuple[float, float] = (0.0, 0.02)
@@ -114,14 +133,32 @@ class GraspTask:
     """Length scale of the reach term [m]."""
     contact_force: float = 0.01
     """A finger is in compressive contact when the normal reactions on its nodes sum to at least this [N]."""
-    fragile_force: float = 0.5
-    """Largest force one finger may press on the object without harming it [N]."""
-    hold_distance: float = 0.03
+    fragile_force: tuple[float, float] = (1.0, 4.0)
+    """The specimen's fragility limit [N], drawn per episode: the largest force one finger may press on it (the sum
+    of the finger's normal reactions, averaged over a control interval) without harming it. Pressing harder harms
+    it and ends the episode as a failure. The limit is observed: a gripper is told what it is sent to take."""
+    sustained_force_time: float = 0.2
+    """Time constant [s] of a finger's sustained force: its force, averaged over a control interval, through a
+    first-order low-pass filter. The fragility limit bounds it, and a finger touches while it is at least
+    ``contact_force``. Soft tissue is harmed by pressure held, not by the brief peaks of a touch or of stick–slip,
+    which move a finger's 50 ms mean force by up to ±1 N from one interval to the next and lift a touch for an
+    interval now and then; 0 uses the interval mean itself."""
+    gust_speed: tuple[float, float] = (0.05, 0.15)
+    """Peak speed of the current gust that tests each grasp [m/s], horizontal, in a random direction."""
+    gust_start: tuple[float, float] = (2.0, 2.5)
+    """When the gust begins [s], drawn per episode."""
+    gust_duration: float = 0.5
+    """How long the gust blows [s], rising and falling smoothly (:class:`~.physics.Current`)."""
+    episode_duration: float = 4.0
+    """Length of an episode [s]: the registered environment's time limit is this over ``control_dt`` (80
+    actions)."""
+    hold_distance: float = 0.05
     """Held: the object's centre within this of the grasp point [m]."""
     rest_speed: float = 0.05
     """Held: the object slower than this relative to the palm [m/s]."""
     success_duration: float = 1.0
-    """Success: held continuously for this long [s]."""
+    """Success: at the episode's end, held continuously since the gust began and for at least this long [s], and
+    never harmed."""
     lost_distance: float = 0.15
     """The episode terminates when the object's centre is farther than this from the grasp point [m]."""
     reward: RewardWeights = field(default_factory=RewardWeights)
@@ -142,6 +179,8 @@ class GraspTask:
         except ValueError as error:
             raise ValueError(str(error).replace("ContactSettings.", "GraspTask.")) from None
         check_range("GraspTask", "max_curvature_rate", self.max_curvature_rate, "1/s", 0.0, 100.0)
+        check_range("GraspTask", "action_exponent", self.action_exponent, "(dimensionless)", 1.0, 10.0,
+                    low_inclusive=True, high_inclusive=True)
         _check_interval("curvature_range", self.curvature_range, "(dimensionless)", -NATURAL_CURVATURE_LIMIT,
                         NATURAL_CURVATURE_LIMIT)
         if not self.curvature_range[0] <= 0.0 <= self.curvature_range[1]:
@@ -155,17 +194,29 @@ class GraspTask:
         _check_interval("current_speed", self.current_speed, "m/s", 0.0, 0.5)
         _check_interval("current_oscillation", self.current_oscillation, "m/s", 0.0, 0.5)
         _check_interval("current_period", self.current_period, "s", *OPTION_RANGES["current_period"])
-        for name, low, high in (("grasp_point", -0.3, 0.3), ("object_offset", 0.0, 0.05)):
+        for name, low, high in (("grasp_point", -0.3, 0.3), ("start_point", -0.3, 0.3), ("object_offset", 0.0, 0.05)):
             value = tuple(getattr(self, name))
             if len(value) != 3:
                 raise ValueError(f"GraspTask.{name} = {value!r} must have 3 components [m]")
             for v in value:
                 check_range("GraspTask", name, v, "m", low, high, low_inclusive=True)
             object.__setattr__(self, name, tuple(float(v) for v in value))
-        for name, unit in (("reach_distance", "m"), ("contact_force", "N"), ("fragile_force", "N"),
-                           ("hold_distance", "m"), ("rest_speed", "m/s"), ("success_duration", "s"),
-                           ("lost_distance", "m")):
+        for name, unit in (("reach_distance", "m"), ("contact_force", "N"), ("hold_distance", "m"),
+                           ("rest_speed", "m/s"), ("success_duration", "s"), ("lost_distance", "m"),
+                           ("gust_duration", "s"), ("episode_duration", "s")):
             check_range("GraspTask", name, getattr(self, name), unit, 0.0, 1e3)
+        check_range("GraspTask", "sustained_force_time", self.sustained_force_time, "s", 0.0, 100.0,
+                    low_inclusive=True)
+        _check_interval("fragile_force", self.fragile_force, "N", *OPTION_RANGES["fragile_force"])
+        _check_interval("gust_speed", self.gust_speed, "m/s", 0.0, 0.5)
+        _check_interval("gust_start", self.gust_start, "s", 0.0, 1e3)
+        last_gust_end = self.gust_start[1] + self.gust_duration
+        if last_gust_end + self.success_duration > self.episode_duration + 1e-9:
+            raise ValueError(f"GraspTask.episode_duration = {self.episode_duration!r} s must leave success_duration = "
+                             f"{self.success_duration!r} s after the latest gust's end ({last_gust_end!r} s)")
+        if abs(self.episode_duration / self.control_dt - round(self.episode_duration / self.control_dt)) > 1e-6:
+            raise ValueError(f"GraspTask.episode_duration = {self.episode_duration!r} s must be a whole multiple of "
+                             f"control_dt = {self.control_dt!r} s")
         if not isinstance(self.newton, NewtonSettings):
             raise ValueError(f"GraspTask.newton must be a NewtonSettings, got {type(self.newton).__name__}")
         if not isinstance(self.reward, RewardWeights):
@@ -176,15 +227,33 @@ class GraspTask:
         """Physics steps per action."""
         return int(round(self.control_dt / self.physics_dt))
 
+    def curvature_rate(self, action: np.ndarray) -> np.ndarray:
+        """The natural-curvature rate [1/s] of actions in [−1, 1] (``action_exponent``)."""
+        return self.max_curvature_rate * np.sign(action) * np.abs(action) ** self.action_exponent
+
+    def action_for_rate(self, rate: np.ndarray) -> np.ndarray:
+        """The action in [−1, 1] that sets the natural-curvature rate ``rate`` [1/s] (clipped to the range)."""
+        ratio = np.clip(np.asarray(rate, dtype=float) / self.max_curvature_rate, -1.0, 1.0)
+        return np.sign(ratio) * np.abs(ratio) ** (1.0 / self.action_exponent)
+
+    @property
+    def max_episode_steps(self) -> int:
+        """Actions per episode."""
+        return int(round(self.episode_duration / self.control_dt))
+
 
 OPTION_RANGES = {
     "object_radius": (0.01, 0.09),
     "object_density": (500.0, 3000.0),
     "current_period": (0.1, 100.0),
+    "fragile_force": (0.01, 100.0),
+    "gust_start": (0.0, 1e3),
 }
-_OPTION_UNITS = {"object_radius": "m", "object_density": "kg/m³", "current_period": "s"}
+_OPTION_UNITS = {"object_radius": "m", "object_density": "kg/m³", "current_period": "s", "fragile_force": "N",
+                 "gust_start": "s"}
 """Allowed (low, high) of the scalars that ``reset(options=...)`` may fix, and of the task's drawn ranges."""
-VECTOR_OPTIONS = {"object_offset": (0.05, "m"), "current_velocity": (0.5, "m/s"), "current_oscillation": (0.5, "m/s")}
+VECTOR_OPTIONS = {"object_offset": (0.05, "m"), "current_velocity": (0.5, "m/s"), "current_oscillation": (0.5, "m/s"),
+                  "gust_velocity": (0.5, "m/s")}
 """The 3-vectors that ``reset(options=...)`` may fix: each component in [−bound, bound), and its unit."""
 SCENE_OPTIONS = ("task", "paper")
 
@@ -229,13 +298,21 @@ def check_options(options: dict | None) -> dict:
     return checked
 
 
-def task_scene(task: GraspTask, rng: np.random.Generator, options: dict) -> Scene:
-    """The scene of one episode: drawn from the task's ranges by ``rng``, with ``options`` (checked) fixing any of
-    them; or the paper's exact scene (its fixed ball, Stokes drag, no buoyancy) for ``scene="paper"``, with the
-    task's gripper (the paper's, unless the task names another)."""
+class TaskEpisode(NamedTuple):
+    """One episode as drawn at reset: its scene, and what the task knows of the specimen beyond the physics."""
+
+    scene: Scene
+    fragile_force: float
+    """The specimen's fragility limit [N] (:attr:`GraspTask.fragile_force`)."""
+
+
+def task_episode(task: GraspTask, rng: np.random.Generator, options: dict) -> TaskEpisode:
+    """One episode: its scene and specimen drawn from the task's ranges by ``rng``, with ``options`` (checked)
+    fixing any of them; or the paper's exact scene (its fixed ball, Stokes drag, no buoyancy, no gust, nothing
+    fragile) for ``scene="paper"``, with the task's gripper (the paper's, unless the task names another)."""
     if options.get("scene") == "paper":
-        return replace(paper_scene(task.model, grasped_object=PAPER_BALL), gripper=task.gripper,
-                       time_step=task.physics_dt, newton=task.newton)
+        return TaskEpisode(replace(paper_scene(task.model, grasped_object=PAPER_BALL), gripper=task.gripper,
+                                   time_step=task.physics_dt, newton=task.newton), math.inf)
     # every draw is made, fixed or not, so that fixing one quantity leaves the others' draws unchanged
     radius = rng.uniform(*task.object_radius)
     density = rng.uniform(*task.object_density)
@@ -243,18 +320,25 @@ def task_scene(task: GraspTask, rng: np.random.Generator, options: dict) -> Scen
     speed, heading = rng.uniform(*task.current_speed), rng.uniform(0.0, 2 * math.pi)
     amplitude, sway = rng.uniform(*task.current_oscillation), rng.uniform(0.0, 2 * math.pi)
     period, phase = rng.uniform(*task.current_period), rng.uniform(0.0, 2 * math.pi)
+    fragile_force = rng.uniform(*task.fragile_force)
+    gust_speed, gust_heading = rng.uniform(*task.gust_speed), rng.uniform(0.0, 2 * math.pi)
+    gust_start = rng.uniform(*task.gust_start)
     offset = options.get("object_offset", offset)
     current = Current(velocity=options.get("current_velocity", (speed * math.cos(heading), speed * math.sin(heading),
                                                                 0.0)),
                       oscillation=options.get("current_oscillation", (amplitude * math.cos(sway),
                                                                       amplitude * math.sin(sway), 0.0)),
-                      period=options.get("current_period", period), phase=options.get("current_phase", phase))
-    sphere = Sphere(options.get("object_radius", radius), tuple(np.add(task.grasp_point, offset)),
+                      period=options.get("current_period", period), phase=options.get("current_phase", phase),
+                      gust_velocity=options.get("gust_velocity", (gust_speed * math.cos(gust_heading),
+                                                                  gust_speed * math.sin(gust_heading), 0.0)),
+                      gust_start=options.get("gust_start", gust_start), gust_duration=task.gust_duration)
+    sphere = Sphere(options.get("object_radius", radius), tuple(np.add(task.start_point, offset)),
                     density=options.get("object_density", density), friction=task.object_friction)
     palm_friction = min(task.object_friction, 1e5)  # the palm's law is regularised and takes a finite μ
-    return Scene(gripper=task.gripper, forces=(Gravity(),) + fluid_forces("water"), fluid=Fluid(current=current),
-                 model=task.model, time_step=task.physics_dt, newton=task.newton, grasped_object=sphere,
-                 contact=ContactSettings(palm_friction=palm_friction, friction_passes=task.friction_passes))
+    scene = Scene(gripper=task.gripper, forces=(Gravity(),) + fluid_forces("water"), fluid=Fluid(current=current),
+                  model=task.model, time_step=task.physics_dt, newton=task.newton, grasped_object=sphere,
+                  contact=ContactSettings(palm_friction=palm_friction, friction_passes=task.friction_passes))
+    return TaskEpisode(scene, options.get("fragile_force", fragile_force))
 
 
 @dataclass(frozen=True)
@@ -263,6 +347,9 @@ class StepOutcome:
 
     reward: np.ndarray
     terminated: np.ndarray
+    """The object lost, or the specimen harmed."""
+    truncated: np.ndarray
+    """A solver failure, or the episode's end (``episode_duration``), where not terminated."""
     solver_failure: np.ndarray
     reward_terms: dict[str, np.ndarray]
     """Each reward term (B,); they sum to ``reward``."""
@@ -288,15 +375,32 @@ class GraspBatch:
         contact makes the reaction of a single physics step impulsive, its mean over the interval is not."""
         self.hold_time = np.zeros(B)
         """How long each object has been held without a break [s]."""
+        self.fragile_force = np.full(B, np.inf)
+        """Each specimen's fragility limit [N]."""
+        self.gust_start = np.zeros(B)
+        """When each episode's gust begins [s] (0 where none blows)."""
+        self.gust_end = np.zeros(B)
+        """When it has passed [s]."""
+        self.sustained_force = np.zeros((B, task.gripper.n_fingers))
+        """Each finger's force through the low-pass filter of ``sustained_force_time`` [N], (B, F)."""
+        self.harmed = np.zeros(B, dtype=bool)
+        """Whether a finger pressed above the specimen's fragility limit (the episode then ends)."""
+        self.kept_through_gust = np.ones(B, dtype=bool)
+        """Whether every finger touched the object when the gust began, and the object has stayed within
+        ``hold_distance`` of the grasp point since."""
+        self.object_radius = np.zeros(B)
+        """Each object's radius [m]."""
         self.time = np.zeros(B)
         """Simulated time of each episode [s]."""
         self.newton_iterations = np.zeros(B, dtype=np.int64)
 
     # --- reset -----------------------------------------------------------------------------------------------------
-    def reset(self, indices, scenes: list[Scene], kind: str) -> None:
-        """Starts new episodes in the slots ``indices`` with ``scenes`` (one each). ``kind`` ("task" or "paper")
-        must be the same for the whole batch; a change of kind rebuilds the simulator, which needs every slot."""
+    def reset(self, indices, episodes: list[TaskEpisode], kind: str) -> None:
+        """Starts new episodes in the slots ``indices`` (one each, :func:`task_episode`). ``kind`` ("task" or
+        "paper") must be the same for the whole batch; a change of kind rebuilds the simulator, which needs every
+        slot."""
         indices = np.asarray(indices, dtype=np.int64)
+        scenes = [episode.scene for episode in episodes]
         if kind != self.kind:
             if len(indices) != self.batch_size:
                 raise ValueError(f"reset option scene = {kind!r}: a vector of environments runs one kind of scene; "
@@ -320,6 +424,14 @@ class GraspBatch:
         self.normal_force[indices] = 0.0
         self.contact_force[indices] = 0.0
         self.hold_time[indices] = 0.0
+        self.fragile_force[indices] = [episode.fragile_force for episode in episodes]
+        self.gust_start[indices] = [episode.scene.fluid.current.gust_start for episode in episodes]
+        self.gust_end[indices] = [episode.scene.fluid.current.gust_start + episode.scene.fluid.current.gust_duration
+                                  for episode in episodes]
+        self.harmed[indices] = False
+        self.sustained_force[indices] = 0.0
+        self.kept_through_gust[indices] = True
+        self.object_radius[indices] = [scene.grasped_object.radius for scene in scenes]
         self.time[indices] = 0.0
         self.newton_iterations[indices] = 0
 
@@ -327,7 +439,7 @@ class GraspBatch:
     def step(self, action: np.ndarray, active: np.ndarray) -> StepOutcome:
         """Advances the episodes where ``active`` (B,) by one control interval with ``action`` (B, F) in [−1, 1]."""
         task = self.task
-        rate = action * task.max_curvature_rate
+        rate = task.curvature_rate(action)
         low, high = task.curvature_range
         failed = np.zeros(self.batch_size, dtype=bool)
         iterations = np.zeros(self.batch_size, dtype=np.int64)
@@ -365,11 +477,21 @@ class GraspBatch:
         self.normal_force[active] = impulse[active] / task.control_dt
         self.contact_force[active] = force_impulse[active] / task.control_dt
 
-        terms, held = self._reward_terms(action)
+        keep = math.exp(-task.control_dt / task.sustained_force_time) if task.sustained_force_time > 0 else 0.0
+        self.sustained_force[active] = keep * self.sustained_force[active] + (1.0 - keep) * self.finger_force[active]
+        harm = active & ~self.harmed & (self.sustained_force.max(axis=1) > self.fragile_force)
+        self.harmed |= harm
+        held = self._held()
+        blowing = active & (self.time >= self.gust_start - 1e-9)
+        began = blowing & (self.time - task.control_dt < self.gust_start - 1e-9)
+        near = np.linalg.norm(self.object_offset, axis=1) <= task.hold_distance
+        self.kept_through_gust &= ~(began & ~self.touching.all(axis=1)) & ~(blowing & ~near)
         self.hold_time = np.where(active, np.where(held, self.hold_time + task.control_dt, 0.0), self.hold_time)
+        last = active & (self.time >= task.episode_duration - 1e-9)
+        terms = self._reward_terms(action, held, harm, last & self.is_success)
         reward = sum(terms.values())
-        distance = np.linalg.norm(self.object_position - np.asarray(task.grasp_point), axis=1)
-        return StepOutcome(reward=reward, terminated=active & (distance > task.lost_distance),
+        terminated = active & ((np.linalg.norm(self.object_offset, axis=1) > task.lost_distance) | harm)
+        return StepOutcome(reward=reward, terminated=terminated, truncated=~terminated & ((active & failed) | last),
                            solver_failure=active & failed, reward_terms=terms)
 
     # --- what the episodes see -------------------------------------------------------------------------------------
@@ -380,6 +502,11 @@ class GraspBatch:
             return self.state.body_position
         center = np.asarray(self.sim.scene.grasped_object.center)
         return np.broadcast_to(center, (self.batch_size, 3))
+
+    @property
+    def object_offset(self) -> np.ndarray:
+        """Object centre relative to the grasp point [m], (B, 3)."""
+        return self.object_position - np.asarray(self.task.grasp_point)
 
     @property
     def object_velocity(self) -> np.ndarray:
@@ -403,27 +530,43 @@ class GraspBatch:
         return np.maximum(distance.min(axis=2) - radius[:, None], 0.0)
 
     @property
-    def is_success(self) -> np.ndarray:
-        """Held for at least ``success_duration`` without a break, (B,)."""
-        return self.hold_time >= self.task.success_duration - 1e-9
+    def touching(self) -> np.ndarray:
+        """Which fingers press on the object with a sustained force (:attr:`sustained_force`) of at least
+        ``contact_force``, (B, F) bool: a touch that stick–slip lifts for one control interval still counts."""
+        return self.sustained_force >= self.task.contact_force
 
-    def _reward_terms(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    @property
+    def is_success(self) -> np.ndarray:
+        """Never harmed, the gust passed and the object kept through it (every finger touching it when the gust
+        began, and never farther than ``hold_distance`` from the grasp point since), and held for at least
+        ``success_duration`` without a break, (B,)."""
+        return ~self.harmed & (self.time >= self.gust_end - 1e-9) & self.kept_through_gust \
+            & (self.hold_time >= self.task.success_duration - 1e-9)
+
+    def _held(self) -> np.ndarray:
+        """Every finger touching, the object near the grasp point and at rest, (B,)."""
+        task = self.task
+        return self.touching.all(axis=1) & (np.linalg.norm(self.object_offset, axis=1) <= task.hold_distance) \
+            & (np.linalg.norm(self.object_velocity, axis=1) <= task.rest_speed)
+
+    def _reward_terms(self, action: np.ndarray, held: np.ndarray, harm: np.ndarray,
+                      succeeded: np.ndarray) -> dict[str, np.ndarray]:
         task, weights = self.task, self.task.reward
-        touching = self.finger_force >= task.contact_force
+        touching = self.touching
         grasped = touching.all(axis=1)
-        distance = np.linalg.norm(self.object_position - np.asarray(task.grasp_point), axis=1)
+        distance = np.linalg.norm(self.object_offset, axis=1)
         speed = np.linalg.norm(self.object_velocity, axis=1)
-        excess = np.maximum(self.finger_force.max(axis=1) - task.fragile_force, 0.0)
-        terms = {
+        load = self.sustained_force.max(axis=1) / self.fragile_force
+        return {
             "reach": weights.reach * (1.0 - np.tanh(self.finger_gap / task.reach_distance)).mean(axis=1),
             "contact": weights.contact * touching.mean(axis=1),
             "hold": weights.hold * grasped * (1.0 - np.tanh(distance / task.hold_distance)),
             "rest": weights.rest * grasped * (1.0 - np.tanh(speed / task.rest_speed)),
-            "overload": -weights.overload * np.tanh(excess / task.fragile_force),
+            "pressure": -weights.pressure * np.clip((load - 0.7) / 0.3, 0.0, 1.0),
             "effort": -weights.effort * np.mean(action**2, axis=1),
+            "harm": -weights.harm * harm,
+            "success": weights.success * succeeded,
         }
-        held = grasped & (distance <= task.hold_distance) & (speed <= task.rest_speed)
-        return terms, held
 
     def observation_parts(self) -> dict[str, np.ndarray]:
         """The observation's parts per episode, in the order they are concatenated (see the env's spec sheet)."""
@@ -434,8 +577,14 @@ class GraspBatch:
             "node_velocities": state.velocity[..., :D].reshape(self.batch_size, -1),
             "natural_curvature": self.natural_curvature,
             "normal_forces": self.normal_force.reshape(self.batch_size, -1),
-            "object_position": self.object_position,
+            "finger_forces": self.finger_force,
+            "finger_gaps": self.finger_gap,
+            "touching": self.touching.astype(float),
+            "fragile_force": np.minimum(self.fragile_force, OPTION_RANGES["fragile_force"][1])[:, None],
+            "object_radius": self.object_radius[:, None],
+            "object_offset": self.object_offset,
             "object_velocity": self.object_velocity,
+            "episode_fraction": (self.time / self.task.episode_duration)[:, None],
         }
 
 

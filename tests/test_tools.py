@@ -65,7 +65,7 @@ def test_grasp_outcome_summary_scores_settings_against_the_reference(tmp_path):
     positions = rng.normal(size=(seeds, 3)) * 0.05
 
     def run(successes, positions):
-        return {"successes": [bool(x) for x in successes], "final_object_positions": positions.tolist(),
+        return {"successes": [bool(x) for x in successes], "final_object_offsets": positions.tolist(),
                 "success_rate": float(np.mean(successes)), "endings": {"solver_failure": 0}}
 
     flipped = successes.copy()

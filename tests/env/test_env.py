@@ -26,6 +26,9 @@ from soft_gripper_env.env import (
 from soft_gripper_env.grasp_task import GraspTask
 from soft_gripper_env.physics import PAPER_BALL, NewtonSettings, paper_scene, run_ramp
 
+SUCCESS_SEED = 3
+"""A seed the reactive controller takes (it succeeds on about three seeds in four)."""
+
 ENV_ID = soft_gripper_env.ENV_ID
 
 
@@ -54,7 +57,7 @@ def test_make_without_import_registers_and_sets_the_time_limit():
             "print(env.spec.max_episode_steps, env.observation_space.shape)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["60", f"({observation_bounds(GraspTask())[0].size},)"]
+    assert out.stdout.split() == ["80", f"({observation_bounds(GraspTask())[0].size},)"]
 
 
 def test_gymnasium_and_sb3_checkers_pass_without_warnings(env):
@@ -91,7 +94,7 @@ def test_pickled_env_continues_identically(env):
 
 def test_reward_terms_sum_to_the_reward_and_info_types(env):
     obs, info = env.reset(seed=1)
-    assert set(info["reward_terms"]) == {"reach", "contact", "hold", "rest", "overload", "effort"}
+    assert set(info["reward_terms"]) == {"reach", "contact", "hold", "rest", "pressure", "effort", "harm", "success"}
     policy = RampPolicy(rate=-0.5)
     touched = False
     reach = []
@@ -101,6 +104,7 @@ def test_reward_terms_sum_to_the_reward_and_info_types(env):
         assert isinstance(reward, float) and isinstance(terminated, bool) and isinstance(truncated, bool)
         assert reward == pytest.approx(sum(info["reward_terms"].values()), abs=1e-12)
         assert info["reward_terms"]["effort"] == pytest.approx(-0.05 * 1.0)
+        assert info["reward_terms"]["success"] == 0.0 and info["reward_terms"]["pressure"] <= 0.0
         touched |= info["reward_terms"]["contact"] > 0
         assert isinstance(info["is_success"], bool) and not info["solver_failure"]
     assert touched  # the contact term was exercised, not only zeros
@@ -123,10 +127,11 @@ def test_thousand_random_steps_stay_finite_and_inside_the_space():
 def test_paper_scene_with_the_scripted_ramp_reproduces_the_core_simulator():
     """The env rollout of the paper's exact scene (fixed ball, Stokes drag, no buoyancy) with the constant rate
     −0.15 1/s equals the core simulator's direct run of that scene to 1e-9 m at every control step (at the paper's
-    Δt and the core's Newton tolerance)."""
-    env = gym.make(ENV_ID, model="planar", physics_dt=0.01, newton=NewtonSettings())
+    Δt and the core's Newton tolerance, and with a linear action map: the float32 action's rounding, cubed, would
+    move the rate by 1e-8 of itself)."""
+    env = gym.make(ENV_ID, model="planar", physics_dt=0.01, newton=NewtonSettings(), action_exponent=1.0)
     obs, _ = env.reset(seed=0, options={"scene": "paper"})
-    policy = RampPolicy()
+    policy = RampPolicy(GraspTask(action_exponent=1.0))
     layout = observation_slices(GraspTask(model="planar"))
     reference = run_ramp(replace(paper_scene(grasped_object=PAPER_BALL), natural_curvature_rate=PAPER_RATE))
     positions = [obs[layout["node_positions"]]]
@@ -281,7 +286,7 @@ def test_bad_reset_options_raise(env, options, pattern):
     ({"curvature_range": (-0.1, -0.05)}, r"must contain 0"),
     ({"object_radius": (0.06, 0.04)}, r"object_radius = \(0\.06, 0\.04\) must be a \(low, high\) pair"),
     ({"render_mode": "ascii"}, r"render_mode = 'ascii' is not one of"),
-    ({"fragile_force": -1.0}, r"fragile_force = -1\.0 N is outside"),
+    ({"fragile_force": (-1.0, 1.0)}, r"fragile_force = -1\.0 N is outside"),
     ({"object_friction": -0.1}, r"object_friction = -0\.1 is outside the allowed range \[0, inf\]"),
     ({"newton": 1e-6}, r"GraspTask\.newton must be a NewtonSettings, got float"),
     ({"friction_passes": -1}, r"GraspTask\.friction_passes = -1 is outside the allowed range: None or an integer"),
@@ -330,13 +335,22 @@ def test_vector_env_bad_input_and_step_before_reset():
 
 def test_reset_options_fix_the_scene(env):
     options = {"object_radius": 0.045, "object_density": 1003.0, "object_offset": (0.01, -0.01, 0.0),
-               "current_velocity": (0.01, 0.0, 0.0), "current_oscillation": (0.0, 0.0, 0.0)}
-    layout = observation_slices(GraspTask())
+               "current_velocity": (0.01, 0.0, 0.0), "current_oscillation": (0.0, 0.0, 0.0), "fragile_force": 1.5,
+               "gust_velocity": (0.0, 0.1, 0.0), "gust_start": 2.2}
+    task = GraspTask()
+    layout = observation_slices(task)
     for seed in (0, 1):
-        obs, _ = env.reset(seed=seed, options=options)
-        np.testing.assert_allclose(obs[layout["object_position"]], [0.01, -0.01, -0.1], atol=1e-7)
+        obs, info = env.reset(seed=seed, options=options)
+        start = np.add(task.start_point, (0.01, -0.01, 0.0))
+        np.testing.assert_allclose(obs[layout["object_offset"]], start - np.asarray(task.grasp_point), atol=1e-7)
+        assert obs[layout["fragile_force"]][0] == pytest.approx(1.5) and info["fragile_force_N"] == 1.5
+        assert obs[layout["object_radius"]][0] == pytest.approx(0.045) and obs[layout["episode_fraction"]][0] == 0.0
         scene = env.unwrapped._batch.sim.scenes[0]
         assert scene.grasped_object.radius == 0.045 and scene.grasped_object.density == 1003.0
+        current = scene.fluid.current
+        assert current.gust_velocity == (0.0, 0.1, 0.0) and current.gust_start == 2.2
+        # the gust at its peak, on top of the mean current
+        np.testing.assert_allclose(current.at(2.2 + task.gust_duration / 2), [0.01, 0.1, 0.0], atol=1e-12)
 
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -356,38 +370,37 @@ def test_fuzzed_actions_and_options_give_valid_observations(env, actions, radius
             break
 
 
-def test_reactive_policy_closes_until_caged_then_squeezes_by_curvature():
+def test_reactive_policy_approaches_cages_and_regulates_the_force():
     task = GraspTask()
-    policy = ReactivePolicy(task, squeeze=0.015, press_rate=0.05)
+    policy = ReactivePolicy(task, grip=0.3, gust_grip=0.4, gain=0.2, press_rate=0.02, slow_gap=0.02, slowest=0.2)
     layout = observation_slices(task)
-    approach_action = APPROACH_RATE / task.max_curvature_rate
-    press_action = 0.05 / task.max_curvature_rate
 
-    def act(finger_forces, curvature):
+    def rates(forces, touching, gaps=(0.05, 0.05, 0.05), limit=2.0, fraction=0.1):
         obs = np.zeros(observation_bounds(task)[0].size, dtype=np.float32)
-        forces = np.zeros((3, 20))
-        forces[:, 10] = finger_forces
-        obs[layout["normal_forces"]] = forces.ravel()
-        obs[layout["natural_curvature"]] = curvature
-        return policy(obs)
+        obs[layout["finger_forces"]] = forces
+        obs[layout["touching"]] = touching
+        obs[layout["finger_gaps"]] = gaps
+        obs[layout["fragile_force"]] = limit
+        obs[layout["episode_fraction"]] = fraction
+        return task.curvature_rate(policy(obs).astype(float))
 
-    np.testing.assert_allclose(act([0.0, 0.0, 0.0], 0.0), approach_action)  # nothing touches: closing
-    np.testing.assert_allclose(act([0.1, 0.0, 0.0], -0.10), [0.0, approach_action, approach_action])  # 0 waits
-    # all touch: each presses toward its own touch κ̄ − 0.015 (finger 0 touched at −0.10, the others now)
-    np.testing.assert_allclose(act([0.0, 0.2, 0.3], [-0.10, -0.12, -0.12]), -press_action, rtol=1e-6)
-    # within reach of the target in one interval, the action lands on it: κ̄ changes by action·0.5·0.05
-    np.testing.assert_allclose(act([0.5, 0.5, 0.5], [-0.113, -0.134, -0.135]), [-0.08, -0.04, 0.0], atol=1e-5)
-    # past the target (the finger was pushed): back towards it, at most at the press rate; forces play no part
-    np.testing.assert_allclose(act([9.0, 0.0, 0.5], [-0.12, -0.14, -0.135]), [press_action, press_action, 0.0],
-                               atol=1e-5)
-    # κ̄ = 0 on every finger: a new episode, the touch curvatures are forgotten
-    np.testing.assert_allclose(act([0.0, 0.0, 0.0], 0.0), approach_action)
+    np.testing.assert_allclose(rates(0, 0), APPROACH_RATE, rtol=1e-5)  # far from the specimen: closing fast
+    np.testing.assert_allclose(rates(0, 0, gaps=(0.01, 0.002, 0.0)), APPROACH_RATE * np.array([0.5, 0.2, 0.2]),
+                               rtol=1e-5)  # slowing within 2 cm, to a fifth of the rate
+    # one finger touches below its target: it waits while the others close; above its target it backs off
+    np.testing.assert_allclose(rates([0.2, 0, 0], [1, 0, 0]), [0.0, APPROACH_RATE, APPROACH_RATE], rtol=1e-5)
+    np.testing.assert_allclose(rates([1.2, 0, 0], [1, 0, 0])[0], 0.02, rtol=1e-5)
+    # all touch: each regulates towards 0.3 × 2 N, proportionally, at most 0.02 1/s either way
+    expected = np.clip(0.2 * task.max_curvature_rate * (np.array([0.55, 0.6, 0.9]) - 0.6) / 0.6, -0.02, 0.02)
+    np.testing.assert_allclose(rates([0.55, 0.6, 0.9], [1, 1, 1]), expected, rtol=1e-5, atol=1e-7)
+    # while a gust may blow, the target is 0.4 × 2 N: 0.6 N is now too little
+    assert np.all(rates([0.6, 0.6, 0.6], [1, 1, 1], fraction=0.6) < 0.0)
     batch = np.stack([np.zeros(observation_bounds(task)[0].size, dtype=np.float32)] * 2)
     assert policy(batch).shape == (2, 3)
     with pytest.raises(ValueError, match=r"rate = -2\.0 1/s is outside"):
         RampPolicy(rate=-2.0)
-    with pytest.raises(ValueError, match=r"ReactivePolicy\.squeeze = 0\.5 \(dimensionless\) is outside"):
-        ReactivePolicy(task, squeeze=0.5)
+    with pytest.raises(ValueError, match=r"ReactivePolicy\.grip = 1\.5 \(dimensionless\) is outside"):
+        ReactivePolicy(task, grip=1.5)
     with pytest.raises(ValueError, match=r"ReactivePolicy\.press_rate = 0\.0 1/s is outside"):
         ReactivePolicy(task, press_rate=0.0)
     with pytest.raises(ValueError, match=r"ReactivePolicy\.approach_rate = 0\.0 1/s is outside the allowed range "
@@ -395,23 +408,52 @@ def test_reactive_policy_closes_until_caged_then_squeezes_by_curvature():
         ReactivePolicy(task, approach_rate=0.0)
 
 
-def test_reactive_grasp_succeeds_after_a_one_second_hold():
-    """Seed 1013 is one the reactive controller grasps (with friction it holds on about 1 seed in 10): is_success
-    turns on once the hold has lasted 1 s, not before, and the hold clock in info explains it."""
+def test_the_cubic_action_map_and_its_inverse():
+    """An action a sets the rate max_curvature_rate·sign(a)·|a|³; action_for_rate inverts it (and clips)."""
+    task = GraspTask()
+    actions = np.linspace(-1.0, 1.0, 41)
+    np.testing.assert_allclose(task.curvature_rate(actions), 0.5 * np.sign(actions) * np.abs(actions) ** 3)
+    np.testing.assert_allclose(task.action_for_rate(task.curvature_rate(actions)), actions, atol=1e-12)
+    assert task.action_for_rate(-2.0) == -1.0
+    linear = GraspTask(action_exponent=1.0)
+    np.testing.assert_allclose(linear.curvature_rate(actions), 0.5 * actions)
+
+
+def test_reactive_grasp_succeeds_once_held_through_the_gust():
+    """On a seed the reactive controller takes, is_success turns on only after the gust has passed and the hold
+    has lasted 1 s, and the episode ends truncated at 4 s with the success bonus."""
     env = gym.make(ENV_ID)
     policy = ReactivePolicy()
-    obs, info = env.reset(seed=1013)
-    flags, holds = [], []
+    obs, info = env.reset(seed=SUCCESS_SEED)
+    gust = env.unwrapped._batch.sim.scenes[0].fluid.current
+    flags, holds, times = [], [], []
     done = False
     while not done:
         obs, reward, terminated, truncated, info = env.step(policy(obs))
         flags.append(info["is_success"])
         holds.append(info["hold_time_s"])
+        times.append(info["time_s"])
         done = terminated or truncated
-    assert flags[-1] and not terminated
+    assert flags[-1] and truncated and not terminated and not info["harmed"]
+    assert info["reward_terms"]["success"] == GraspTask().reward.success
     first = flags.index(True)
-    assert holds[first] == pytest.approx(1.0) and all(h < 1.0 - 1e-9 for h in holds[:first])
+    assert times[first] >= gust.gust_start + gust.gust_duration - 1e-9 and holds[first] >= 1.0 - 1e-9
+    assert times[-1] == pytest.approx(GraspTask().episode_duration)
     assert all(holds[k] == pytest.approx(holds[k - 1] + 0.05) or holds[k] == 0.0 for k in range(1, len(holds)))
+
+
+def test_pressing_above_the_fragility_limit_harms_and_ends_the_episode():
+    env = gym.make(ENV_ID)
+    obs, info = env.reset(seed=0, options={"fragile_force": 0.05, "object_offset": (0.0, 0.0, 0.0)})
+    done, steps = False, 0
+    while not done:
+        obs, reward, terminated, truncated, info = env.step(-np.ones(3))
+        done = terminated or truncated
+        steps += 1
+    assert terminated and info["harmed"] and not info["is_success"] and steps < 40
+    assert info["reward_terms"]["harm"] == -GraspTask().reward.harm
+    sustained = env.unwrapped._batch.sustained_force
+    assert sustained.max() > 0.05
 
 
 def test_object_swept_away_by_the_current_terminates_the_episode():
@@ -423,14 +465,14 @@ def test_object_swept_away_by_the_current_terminates_the_episode():
     while not (terminated or truncated):
         obs, reward, terminated, truncated, info = env.step(np.zeros(3))
         steps += 1
-    assert terminated and not truncated and steps < 60
-    assert np.linalg.norm(obs[layout["object_position"]] - np.array([0.0, 0.0, -0.1])) > 0.15
+    assert terminated and not truncated and steps < 60 and not info["harmed"]
+    assert np.linalg.norm(obs[layout["object_offset"]]) > 0.15
 
 
 def test_three_dimensional_fingers():
     env = gym.make(ENV_ID, model="3d")
     obs, _ = env.reset(seed=0)
-    assert obs.shape == (429,) and env.observation_space.contains(obs)
+    assert obs.shape == (441,) and env.observation_space.contains(obs)
     layout = observation_slices(GraspTask(model="3d"))
     for _ in range(5):
         obs, reward, terminated, truncated, info = env.step(np.full(3, -1.0))
@@ -460,11 +502,14 @@ def test_spec_sheet_quotes_the_task_defaults():
     task = GraspTask()
     low, high = task.curvature_range
     quoted = [f"({task.max_curvature_rate:g} 1/s)", f"({low:g} to {high:g}".replace("-", "−"),
-              f"within {task.hold_distance:g} m of the grasp point", f"slower than {task.rest_speed:g} m/s",
-              f"for the last {task.success_duration:g} s", f"more than {task.lost_distance:g} m",
-              f"fragility threshold {task.fragile_force:g} N", f"radius ({task.object_radius[0]:g}–"
-              f"{task.object_radius[1]:g} m)", f"{DEFAULT_MAX_EPISODE_STEPS} steps = "
-              f"{DEFAULT_MAX_EPISODE_STEPS * task.control_dt:g} s"]
+              f"within {task.hold_distance:g} m of the grasp point {task.grasp_point}".replace("-", "−"),
+              f"slower than {task.rest_speed:g} m/s", f"for the last {task.success_duration:g} s",
+              f"more than {task.lost_distance:g} m", f"fragility limit ({task.fragile_force[0]:g}–"
+              f"{task.fragile_force[1]:g} N)", f"radius ({task.object_radius[0]:g}–{task.object_radius[1]:g} m)",
+              f"{task.gust_speed[0]:g}–{task.gust_speed[1]:g} m/s peak",
+              f"begins between {task.gust_start[0]:g} and {task.gust_start[1]:g} s and lasts {task.gust_duration:g} s",
+              f"``episode_duration`` = {task.episode_duration:g} s, {DEFAULT_MAX_EPISODE_STEPS} actions",
+              "sign(a)·|a|³", f"``start_point`` {task.start_point} m".replace("-", "−")]
     missing = [text for text in quoted if text not in sheet]
     assert not missing, missing
 

@@ -260,3 +260,28 @@ def test_dissipative_forces_add_no_potential_energy(model):
     density = water.gripper.finger.material.density
     np.testing.assert_allclose(buoyancy_part, -gravity_part * WATER_DENSITY / density, rtol=1e-9)
     assert np.abs(gravity_part).min() > 0
+
+
+def test_a_gust_is_a_smooth_pulse_on_the_current_and_runs_on_each_grippers_clock():
+    """u(t) = mean + oscillation + gust·sin²(π(t − t₀)/T) on [t₀, t₀ + T], closed form; it starts and ends at zero
+    with zero slope (the water's acceleration stays finite and continuous), and in a batch each gripper's gust runs
+    on its own clock."""
+    gust = Current(velocity=(0.01, 0.0, 0.0), gust_velocity=(0.0, 0.12, 0.0), gust_start=2.0, gust_duration=0.5)
+    for t in (1.9, 2.0, 2.1, 2.25, 2.4, 2.5, 2.6):
+        inside = 2.0 <= t <= 2.5
+        expected = np.array([0.01, 0.12 * np.sin(np.pi * (t - 2.0) / 0.5) ** 2 if inside else 0.0, 0.0])
+        np.testing.assert_allclose(gust.at(t), expected, atol=1e-15)
+    for edge in (2.0, 2.5):  # no jump in the acceleration at either end
+        slope = (gust.at(edge + 1e-6) - gust.at(edge - 1e-6)) / 2e-6
+        assert abs(slope[1]) < 1e-4
+    from soft_gripper_env.physics.scene.fluid import CurrentBatch
+
+    batch = CurrentBatch.of((gust, gust, Current()))
+    batch.set_clock(1, 1.0)  # gripper 1's episode began at batch time 1 s
+    at = batch.at(2.25)
+    np.testing.assert_allclose(at[0], [0.01, 0.12, 0.0], atol=1e-15)
+    np.testing.assert_allclose(at[1], [0.01, 0.0, 0.0], atol=1e-15)  # its clock reads 1.25 s: no gust yet
+    np.testing.assert_allclose(at[2], 0.0)
+    np.testing.assert_allclose(batch.at(3.25)[1], [0.01, 0.12, 0.0], atol=1e-15)
+    with pytest.raises(ValueError, match=r"Current\.gust_duration = -1\.0 s is outside"):
+        Current(gust_duration=-1.0)

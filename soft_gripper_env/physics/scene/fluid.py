@@ -22,7 +22,11 @@ WATER_VISCOSITY = 1.0e-3
 
 @dataclass(frozen=True)
 class Current:
-    """A uniform water current u(t) = velocity + oscillation·sin(2π·t/period + phase) [m/s], world frame."""
+    """A uniform water current u(t) = velocity + oscillation·sin(2π·t/period + phase) + gust(t) [m/s], world frame.
+
+    The gust is a smooth pulse, gust_velocity·sin²(π·(t − gust_start)/gust_duration) while
+    gust_start ≤ t ≤ gust_start + gust_duration and zero otherwise: it rises and falls without a jump, so the water's
+    acceleration, which the added mass and the Froude–Krylov force feel, stays finite."""
 
     velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """Mean current [m/s]."""
@@ -32,9 +36,15 @@ class Current:
     """Period of the oscillating part [s]."""
     phase: float = 0.0
     """Phase of the oscillating part at t = 0 [rad]."""
+    gust_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Peak of the gust [m/s]."""
+    gust_start: float = 0.0
+    """When the gust begins [s]."""
+    gust_duration: float = 0.0
+    """How long it blows [s]; 0 is no gust."""
 
     def __post_init__(self) -> None:
-        for name in ("velocity", "oscillation"):
+        for name in ("velocity", "oscillation", "gust_velocity"):
             value = tuple(float(v) for v in getattr(self, name))
             if len(value) != 3:
                 raise ValueError(f"Current.{name} = {getattr(self, name)!r} must have 3 components [m/s]")
@@ -43,6 +53,8 @@ class Current:
             object.__setattr__(self, name, value)
         check_range("Current", "period", self.period, "s", 0.0)
         check_range("Current", "phase", self.phase, "rad", -1e3, 1e3, low_inclusive=True)
+        check_range("Current", "gust_start", self.gust_start, "s", 0.0, 1e6, low_inclusive=True)
+        check_range("Current", "gust_duration", self.gust_duration, "s", 0.0, 1e6, low_inclusive=True)
 
     def at(self, time: float) -> np.ndarray:
         """Current velocity at ``time`` [m/s], (3,)."""
@@ -51,7 +63,8 @@ class Current:
 
 class CurrentBatch:
     """The currents of a batch of grippers, as arrays: mean and amplitude (B, 3) [m/s], period (B,) [s], phase (B,)
-    [rad], and the batch time at which each gripper's own clock reads 0 (B,) [s]. A gripper's entry is replaced with
+    [rad], the gust's peak (B, 3) [m/s], start and duration (B,) [s] (a gripper without a gust has a zero peak over
+    1 s), and the batch time at which each gripper's own clock reads 0 (B,) [s]. A gripper's entry is replaced with
     :meth:`load`, its clock with :meth:`set_clock`; the arrays are read-only otherwise, since :meth:`at` remembers
     what it computed."""
 
@@ -60,6 +73,9 @@ class CurrentBatch:
         self.oscillation = np.zeros((batch_size, 3))
         self.period = np.ones(batch_size)
         self.phase = np.zeros(batch_size)
+        self.gust_velocity = np.zeros((batch_size, 3))
+        self.gust_start = np.zeros(batch_size)
+        self.gust_duration = np.ones(batch_size)
         self.start_time = np.zeros(batch_size)
         self._remembered: dict[float, np.ndarray] = {}
 
@@ -75,6 +91,10 @@ class CurrentBatch:
         self.oscillation[index] = current.oscillation
         self.period[index] = current.period
         self.phase[index] = current.phase
+        gust = current.gust_duration > 0.0
+        self.gust_velocity[index] = current.gust_velocity if gust else 0.0
+        self.gust_start[index] = current.gust_start
+        self.gust_duration[index] = current.gust_duration if gust else 1.0
         self._remembered.clear()
 
     def set_clock(self, index, start_time) -> None:
@@ -89,8 +109,15 @@ class CurrentBatch:
         if velocity is None:
             if len(self._remembered) >= 2:
                 del self._remembered[next(iter(self._remembered))]  # the oldest
-            angle = 2 * math.pi * (time - self.start_time) / self.period + self.phase
-            velocity = self._remembered[time] = self.velocity + self.oscillation * np.sin(angle)[:, None]
+            clock = time - self.start_time
+            angle = 2 * math.pi * clock / self.period + self.phase
+            velocity = self.velocity + self.oscillation * np.sin(angle)[:, None]
+            through = (clock - self.gust_start) / self.gust_duration  # 0 … 1 while the gust blows
+            blowing = (through >= 0.0) & (through <= 1.0) & self.gust_velocity.any(axis=1)
+            if blowing.any():
+                pulse = np.where(blowing, np.sin(math.pi * through) ** 2, 0.0)
+                velocity = velocity + self.gust_velocity * pulse[:, None]
+            self._remembered[time] = velocity
         return velocity
 
     def mean_acceleration(self, time: float, dt: float) -> np.ndarray:
