@@ -381,6 +381,8 @@ class GraspBatch:
         """When each episode's gust begins [s] (0 where none blows)."""
         self.gust_end = np.zeros(B)
         """When it has passed [s]."""
+        self.has_gust = np.zeros(B, dtype=bool)
+        """Whether a gust blows in each episode (not in the paper's scene)."""
         self.sustained_force = np.zeros((B, task.gripper.n_fingers))
         """Each finger's force through the low-pass filter of ``sustained_force_time`` [N], (B, F)."""
         self.harmed = np.zeros(B, dtype=bool)
@@ -425,9 +427,10 @@ class GraspBatch:
         self.contact_force[indices] = 0.0
         self.hold_time[indices] = 0.0
         self.fragile_force[indices] = [episode.fragile_force for episode in episodes]
-        self.gust_start[indices] = [episode.scene.fluid.current.gust_start for episode in episodes]
-        self.gust_end[indices] = [episode.scene.fluid.current.gust_start + episode.scene.fluid.current.gust_duration
-                                  for episode in episodes]
+        currents = [scene.fluid.current for scene in scenes]
+        self.gust_start[indices] = [current.gust_start for current in currents]
+        self.gust_end[indices] = [current.gust_start + current.gust_duration for current in currents]
+        self.has_gust[indices] = [current.gust_duration > 0.0 and any(current.gust_velocity) for current in currents]
         self.harmed[indices] = False
         self.sustained_force[indices] = 0.0
         self.kept_through_gust[indices] = True
@@ -482,7 +485,7 @@ class GraspBatch:
         harm = active & ~self.harmed & (self.sustained_force.max(axis=1) > self.fragile_force)
         self.harmed |= harm
         held = self._held()
-        blowing = active & (self.time >= self.gust_start - 1e-9)
+        blowing = active & self.has_gust & (self.time >= self.gust_start - 1e-9)
         began = blowing & (self.time - task.control_dt < self.gust_start - 1e-9)
         near = np.linalg.norm(self.object_offset, axis=1) <= task.hold_distance
         self.kept_through_gust &= ~(began & ~self.touching.all(axis=1)) & ~(blowing & ~near)

@@ -442,6 +442,20 @@ def test_reactive_grasp_succeeds_once_held_through_the_gust():
     assert all(holds[k] == pytest.approx(holds[k - 1] + 0.05) or holds[k] == 0.0 for k in range(1, len(holds)))
 
 
+def test_without_a_gust_success_asks_only_for_the_hold():
+    """An episode whose gust is still (or the paper's scene, which has none) is judged by the hold alone: nothing
+    to keep the specimen through."""
+    env = gym.make(ENV_ID)
+    env.reset(seed=0, options={"gust_velocity": (0.0, 0.0, 0.0)})
+    batch = env.unwrapped._batch
+    assert not batch.has_gust[0]
+    for _ in range(3):
+        env.step(np.zeros(3))
+    assert batch.kept_through_gust[0]
+    env.reset(seed=0, options={"scene": "paper"})
+    assert not batch.has_gust[0] and batch.fragile_force[0] == math.inf
+
+
 def test_pressing_above_the_fragility_limit_harms_and_ends_the_episode():
     env = gym.make(ENV_ID)
     obs, info = env.reset(seed=0, options={"fragile_force": 0.05, "object_offset": (0.0, 0.0, 0.0)})
