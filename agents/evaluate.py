@@ -22,7 +22,7 @@ import numpy as np
 from tqdm import tqdm
 
 from agents.scripted import RampPolicy, RandomPolicy, ReactivePolicy
-from soft_gripper_env.env import SoftGripperUnderwaterVectorEnv, observation_slices
+from soft_gripper_env.env import SoftGripperUnderwaterVectorEnv, observation_bounds, observation_slices
 from soft_gripper_env.grasp_task import GraspTask
 
 PRETRAINED = Path(__file__).resolve().parent / "pretrained"
@@ -121,12 +121,19 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
         normalize = pickle.load(f)
     normalize.training = False
 
+    size = normalize.obs_rms.mean.shape[0]
+
     def act(observation: np.ndarray) -> np.ndarray:
         observation = np.asarray(observation)
+        if observation.shape[-1] != size:
+            raise ValueError(f"the policy in {model_dir} takes observations of {size} values, got "
+                             f"{observation.shape[-1]} (the planar and 3-D models observe node states in 2 and 3 "
+                             f"components)")
         batch = observation.reshape(-1, observation.shape[-1])
         action, _ = model.predict(normalize.normalize_obs(batch), deterministic=True)
         return action.reshape(observation.shape[:-1] + action.shape[-1:])
 
+    act.observation_size = size
     return act
 
 
@@ -161,6 +168,10 @@ def main(argv: list[str] | None = None) -> dict:
         policy = make_policy(args.policy, task, args.seed)
     except FileNotFoundError as error:
         parser.error(str(error))
+    expected = observation_bounds(task)[0].size
+    if getattr(policy, "observation_size", expected) != expected:
+        parser.error(f"--policy {args.policy} takes observations of {policy.observation_size} values, and the "
+                     f"{args.model} model gives {expected} (a policy acts in the rod model it was trained in)")
     result = evaluate(policy, args.episodes, args.seed, num_envs=args.num_envs, model=args.model)
     result.update(policy=args.policy, model=args.model)
     print("| policy | model | episodes | success | mean return | mean peak finger force [N] |\n"

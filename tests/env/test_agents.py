@@ -85,6 +85,8 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     assert {"success_rate", "mean_return", "mean_peak_contact_force_N", "endings"} <= set(result)
     assert result["episodes"] == 2 and result["first_seed"] == 5 and sum(result["endings"].values()) == 2
     assert "| policy | model |" in out.stdout
+    out = run_script("-m", "agents.evaluate", "--policy", str(tmp_path), "--episodes", "1", "--model", "planar")
+    assert out.returncode == 2 and "a policy acts in the rod model it was trained in" in out.stderr
 
 
 def test_evaluate_runs_seeds_as_single_envs_do():
