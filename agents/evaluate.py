@@ -68,6 +68,7 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
     num_envs = max(1, min(num_envs, episodes))
     venv = SoftGripperUnderwaterVectorEnv(num_envs, **settings)
     task = venv.task
+    offset_part = observation_slices(task)["object_offset"]
     outcomes: list[tuple[bool, float, int, float, str, list[float]]] = []
     start = time.perf_counter()
     with tqdm(total=episodes, desc="episodes", unit="episode", disable=not progress) as bar:
@@ -86,7 +87,7 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
                 for k in np.nonzero(running & (terminated | truncated))[0]:
                     single = {key: info[key][k] for key in ("is_success", "harmed", "solver_failure",
                                                             "finger_forces_N")}
-                    offset = observations[k][observation_slices(task)["object_offset"]]
+                    offset = observations[k][offset_part]
                     ended[k] = (bool(single["is_success"]), float(returns[k]), int(lengths[k]), float(peaks[k]),
                                 episode_ending(task, observations[k], bool(terminated[k]), single),
                                 [float(x) for x in offset])

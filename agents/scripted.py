@@ -19,20 +19,6 @@ APPROACH_RATE = -0.3
 or heavier than the water drifts off while the fingers close, so the sooner they touch the better."""
 
 
-class RampPolicy:
-    """The paper's actuation: every finger's κ̄ grows at a constant ``rate`` [1/s], whatever it observes."""
-
-    def __init__(self, task: GraspTask | None = None, rate: float = PAPER_RATE) -> None:
-        task = task or GraspTask()
-        if abs(rate) > task.max_curvature_rate:
-            raise ValueError(f"rate = {rate!r} 1/s is outside the allowed range [−{task.max_curvature_rate:g}, "
-                             f"{task.max_curvature_rate:g}] 1/s of the task's actions")
-        self.action = np.full(task.gripper.n_fingers, task.action_for_rate(rate), dtype=np.float32)
-
-    def __call__(self, observation: np.ndarray) -> np.ndarray:
-        return np.broadcast_to(self.action, np.shape(observation)[:-1] + self.action.shape).copy()
-
-
 class ConstantPolicy:
     """The same ``action`` in [−1, 1] on every finger at every step: the open-loop check that the task needs
     feedback."""
@@ -45,6 +31,17 @@ class ConstantPolicy:
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         return np.broadcast_to(self.action, np.shape(observation)[:-1] + self.action.shape).copy()
+
+
+class RampPolicy(ConstantPolicy):
+    """The paper's actuation: every finger's κ̄ grows at a constant ``rate`` [1/s], whatever it observes."""
+
+    def __init__(self, task: GraspTask | None = None, rate: float = PAPER_RATE) -> None:
+        task = task or GraspTask()
+        if abs(rate) > task.max_curvature_rate:
+            raise ValueError(f"rate = {rate!r} 1/s is outside the allowed range [−{task.max_curvature_rate:g}, "
+                             f"{task.max_curvature_rate:g}] 1/s of the task's actions")
+        super().__init__(task, float(task.action_for_rate(rate)))
 
 
 class RandomPolicy:

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+from dataclasses import fields
 from typing import Any
 
 import gymnasium as gym
@@ -13,7 +14,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .grasp_task import OPTION_RANGES, GraspBatch, GraspTask, check_options, task_episode
+from .grasp_task import OPTION_RANGES, GraspBatch, GraspTask, RewardWeights, check_options, task_episode
 
 DEFAULT_MAX_EPISODE_STEPS = GraspTask().max_episode_steps
 """Episode length of the registered environment: the default task's 4 s, 80 actions of 0.05 s."""
@@ -91,8 +92,7 @@ def _infos(batch: GraspBatch, terms: dict[str, np.ndarray], failure: np.ndarray)
 
 
 def _zero_terms(batch_size: int) -> dict[str, np.ndarray]:
-    return {name: np.zeros(batch_size) for name in ("reach", "contact", "hold", "rest", "pressure", "effort", "harm",
-                                                     "success")}
+    return {term.name: np.zeros(batch_size) for term in fields(RewardWeights)}
 
 
 class SoftGripperUnderwaterEnv(gym.Env):

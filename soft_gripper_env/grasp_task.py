@@ -430,7 +430,7 @@ class GraspBatch:
         currents = [scene.fluid.current for scene in scenes]
         self.gust_start[indices] = [current.gust_start for current in currents]
         self.gust_end[indices] = [current.gust_start + current.gust_duration for current in currents]
-        self.has_gust[indices] = [current.gust_duration > 0.0 and any(current.gust_velocity) for current in currents]
+        self.has_gust[indices] = [current.has_gust for current in currents]
         self.harmed[indices] = False
         self.sustained_force[indices] = 0.0
         self.kept_through_gust[indices] = True
@@ -480,20 +480,23 @@ class GraspBatch:
         self.normal_force[active] = impulse[active] / task.control_dt
         self.contact_force[active] = force_impulse[active] / task.control_dt
 
-        keep = math.exp(-task.control_dt / task.sustained_force_time) if task.sustained_force_time > 0 else 0.0
-        self.sustained_force[active] = keep * self.sustained_force[active] + (1.0 - keep) * self.finger_force[active]
+        decay = math.exp(-task.control_dt / task.sustained_force_time) if task.sustained_force_time > 0 else 0.0
+        self.sustained_force[active] = decay * self.sustained_force[active] + (1.0 - decay) * self.finger_force[active]
         harm = active & ~self.harmed & (self.sustained_force.max(axis=1) > self.fragile_force)
         self.harmed |= harm
-        held = self._held()
+        grasped = self.touching.all(axis=1)
+        distance = np.linalg.norm(self.object_offset, axis=1)
+        speed = np.linalg.norm(self.object_velocity, axis=1)
+        near = distance <= task.hold_distance
+        held = grasped & near & (speed <= task.rest_speed)
         blowing = active & self.has_gust & (self.time >= self.gust_start - 1e-9)
         began = blowing & (self.time - task.control_dt < self.gust_start - 1e-9)
-        near = np.linalg.norm(self.object_offset, axis=1) <= task.hold_distance
-        self.kept_through_gust &= ~(began & ~self.touching.all(axis=1)) & ~(blowing & ~near)
+        self.kept_through_gust &= ~(began & ~grasped) & ~(blowing & ~near)
         self.hold_time = np.where(active, np.where(held, self.hold_time + task.control_dt, 0.0), self.hold_time)
         last = active & (self.time >= task.episode_duration - 1e-9)
-        terms = self._reward_terms(action, held, harm, last & self.is_success)
+        terms = self._reward_terms(action, grasped, distance, speed, harm, last & self.is_success)
         reward = sum(terms.values())
-        terminated = active & ((np.linalg.norm(self.object_offset, axis=1) > task.lost_distance) | harm)
+        terminated = active & ((distance > task.lost_distance) | harm)
         return StepOutcome(reward=reward, terminated=terminated, truncated=~terminated & ((active & failed) | last),
                            solver_failure=active & failed, reward_terms=terms)
 
@@ -546,23 +549,16 @@ class GraspBatch:
         return ~self.harmed & (self.time >= self.gust_end - 1e-9) & self.kept_through_gust \
             & (self.hold_time >= self.task.success_duration - 1e-9)
 
-    def _held(self) -> np.ndarray:
-        """Every finger touching, the object near the grasp point and at rest, (B,)."""
-        task = self.task
-        return self.touching.all(axis=1) & (np.linalg.norm(self.object_offset, axis=1) <= task.hold_distance) \
-            & (np.linalg.norm(self.object_velocity, axis=1) <= task.rest_speed)
-
-    def _reward_terms(self, action: np.ndarray, held: np.ndarray, harm: np.ndarray,
-                      succeeded: np.ndarray) -> dict[str, np.ndarray]:
+    def _reward_terms(self, action: np.ndarray, grasped: np.ndarray, distance: np.ndarray, speed: np.ndarray,
+                      harm: np.ndarray, succeeded: np.ndarray) -> dict[str, np.ndarray]:
+        """Each term of :class:`RewardWeights`, (B,), from the step's measures: every finger touching
+        (``grasped``), the object's distance from the grasp point [m] and speed [m/s], the harm done in this step
+        and whether it ended a successful episode."""
         task, weights = self.task, self.task.reward
-        touching = self.touching
-        grasped = touching.all(axis=1)
-        distance = np.linalg.norm(self.object_offset, axis=1)
-        speed = np.linalg.norm(self.object_velocity, axis=1)
         load = self.sustained_force.max(axis=1) / self.fragile_force
         return {
             "reach": weights.reach * (1.0 - np.tanh(self.finger_gap / task.reach_distance)).mean(axis=1),
-            "contact": weights.contact * touching.mean(axis=1),
+            "contact": weights.contact * self.touching.mean(axis=1),
             "hold": weights.hold * grasped * (1.0 - np.tanh(distance / task.hold_distance)),
             "rest": weights.rest * grasped * (1.0 - np.tanh(speed / task.rest_speed)),
             "pressure": -weights.pressure * np.clip((load - 0.7) / 0.3, 0.0, 1.0),

@@ -56,6 +56,11 @@ class Current:
         check_range("Current", "gust_start", self.gust_start, "s", 0.0, 1e6, low_inclusive=True)
         check_range("Current", "gust_duration", self.gust_duration, "s", 0.0, 1e6, low_inclusive=True)
 
+    @property
+    def has_gust(self) -> bool:
+        """Whether a gust blows: it lasts a while and has a peak."""
+        return self.gust_duration > 0.0 and any(self.gust_velocity)
+
     def at(self, time: float) -> np.ndarray:
         """Current velocity at ``time`` [m/s], (3,)."""
         return CurrentBatch.of((self,)).at(time)[0]
@@ -91,7 +96,7 @@ class CurrentBatch:
         self.oscillation[index] = current.oscillation
         self.period[index] = current.period
         self.phase[index] = current.phase
-        gust = current.gust_duration > 0.0
+        gust = current.has_gust
         self.gust_velocity[index] = current.gust_velocity if gust else 0.0
         self.gust_start[index] = current.gust_start
         self.gust_duration[index] = current.gust_duration if gust else 1.0
