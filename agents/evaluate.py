@@ -123,18 +123,23 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
     normalize.training = False
 
     size = normalize.obs_rms.mean.shape[0]
+    config_file = model_dir / "config.json"
+    observation = "full"
+    if config_file.exists():
+        observation = json.loads(config_file.read_text()).get("task", {}).get("observation", "full")
 
     def act(observation: np.ndarray) -> np.ndarray:
         observation = np.asarray(observation)
         if observation.shape[-1] != size:
             raise ValueError(f"the policy in {model_dir} takes observations of {size} values, got "
-                             f"{observation.shape[-1]} (the planar and 3-D models observe node states in 2 and 3 "
-                             f"components)")
+                             f"{observation.shape[-1]} (observation = 'full' holds node states of 2 components "
+                             f"in the planar model and 3 in 3-D; 'sensors' is the same in both)")
         batch = observation.reshape(-1, observation.shape[-1])
         action, _ = model.predict(normalize.normalize_obs(batch), deterministic=True)
         return action.reshape(observation.shape[:-1] + action.shape[-1:])
 
     act.observation_size = size
+    act.observation = observation
     return act
 
 
@@ -164,17 +169,19 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--num-envs = {args.num_envs} must be at least 1")
     if args.policy not in ("random", "ramp", "reactive", "pretrained") and not Path(args.policy).is_dir():
         parser.error(f"--policy = {args.policy!r} is not random, ramp, reactive, pretrained or a folder")
-    task = GraspTask(model=args.model)
     try:
-        policy = make_policy(args.policy, task, args.seed)
+        policy = make_policy(args.policy, GraspTask(model=args.model), args.seed)
     except FileNotFoundError as error:
         parser.error(str(error))
-    expected = observation_bounds(task)[0].size
+    observation = getattr(policy, "observation", "full")  # a trained policy observes what it was trained on
+    expected = observation_bounds(GraspTask(model=args.model, observation=observation))[0].size
     if getattr(policy, "observation_size", expected) != expected:
         parser.error(f"--policy {args.policy} takes observations of {policy.observation_size} values, and the "
-                     f"{args.model} model gives {expected} (a policy acts in the rod model it was trained in)")
-    result = evaluate(policy, args.episodes, args.seed, num_envs=args.num_envs, model=args.model)
-    result.update(policy=args.policy, model=args.model)
+                     f"{args.model} model gives {expected} (a policy trained on observation = 'full' acts only in "
+                     f"the rod model it was trained in; one trained on 'sensors' acts in both)")
+    result = evaluate(policy, args.episodes, args.seed, num_envs=args.num_envs, model=args.model,
+                      observation=observation)
+    result.update(policy=args.policy, model=args.model, observation=observation)
     print("| policy | model | episodes | success | mean return | mean peak finger force [N] |\n"
           "|---|---|---|---|---|---|\n"
           f"| {args.policy} | {args.model} | {args.episodes} (seeds {args.seed}–{args.seed + args.episodes - 1}) | "

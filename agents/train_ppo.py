@@ -85,6 +85,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--num-threads", type=int, default=2,
                         help="threads stepping the envs (at most --num-envs; 2 uses both cores of a 2-core machine)")
     parser.add_argument("--model", choices=("planar", "3d"), default="3d", help="rod model (default 3d)")
+    parser.add_argument("--observation", choices=("full", "sensors"), default="sensors",
+                        help="what the policy observes (GraspTask.observation; default sensors: the same in both rod "
+                             "models, so the policy also runs in the other)")
     parser.add_argument("--eval-episodes", type=int, default=200, help="held-out episodes at the end (0: none)")
     args = parser.parse_args(argv)
     for name in ("timesteps", "num_envs", "num_threads"):
@@ -96,9 +99,9 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--num-threads = {args.num_threads} must be at most --num-envs = {args.num_envs}")
     args.out.mkdir(parents=True, exist_ok=True)
 
-    task = GraspTask(model=args.model)
+    task = GraspTask(model=args.model, observation=args.observation)
     env = VecNormalize(VecMonitor(SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads,
-                                                       model=args.model),
+                                                       model=args.model, observation=args.observation),
                                   info_keywords=("is_success",)), gamma=PPO_SETTINGS["gamma"])
     model = PPO("MlpPolicy", env, batch_size=min(1024, PPO_SETTINGS["n_steps"] * args.num_envs), **PPO_SETTINGS,
                 policy_kwargs=POLICY_SETTINGS, seed=args.seed, verbose=0, device="cpu",
@@ -111,7 +114,8 @@ def main(argv: list[str] | None = None) -> dict:
     model.save(args.out / "ppo_model.zip")
     env.save(str(args.out / "vecnormalize.pkl"))
     config = {"timesteps": args.timesteps, "seed": args.seed, "num_envs": args.num_envs,
-              "num_threads": args.num_threads, "model": args.model, "wall_s": wall, "ppo": PPO_SETTINGS,
+              "num_threads": args.num_threads, "model": args.model, "observation": args.observation,
+              "wall_s": wall, "ppo": PPO_SETTINGS,
               "policy": POLICY_SETTINGS, "task": json.loads(json.dumps(asdict(task), default=repr))}
     (args.out / "config.json").write_text(json.dumps(config, indent=1))
     (args.out / "curve.json").write_text(json.dumps(progress.curve))
@@ -120,7 +124,8 @@ def main(argv: list[str] | None = None) -> dict:
     if args.eval_episodes:
         for name, policy in (("ppo", load_ppo(args.out)), ("ramp", RampPolicy(task)),
                              ("reactive", ReactivePolicy(task))):
-            result = evaluate(policy, args.eval_episodes, HELD_OUT_SEED, model=args.model)
+            result = evaluate(policy, args.eval_episodes, HELD_OUT_SEED, model=args.model,
+                              observation=args.observation)
             results[name] = {key: result[key] for key in ("success_rate", "mean_return", "mean_peak_contact_force_N",
                                                           "endings")}
             print(f"{name:>9}: success {result['success_rate']:.3f}, return {result['mean_return']:.1f}, "

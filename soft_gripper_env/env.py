@@ -24,42 +24,59 @@ _FORCE_BOUND = 100.0  # [N]
 _OBJECT_BOUND = 1.0  # [m]
 
 
-def observation_slices(task: GraspTask) -> dict[str, slice]:
-    """Where each part of the observation lies (see the env's spec sheet); the sizes follow the task's gripper."""
+_NODE_PARTS = ("node_positions", "node_velocities", "normal_forces")
+"""The parts of a ``"full"`` observation that a ``"sensors"`` observation leaves out."""
+
+
+def _part_bounds(task: GraspTask) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Every part's (low, high) bounds, in the order of the ``"full"`` observation (the env's spec sheet); the
+    sizes follow the task's gripper and rod model."""
     dim = 2 if task.model == "planar" else 3
     n_fingers, n_nodes = task.gripper.n_fingers, task.gripper.finger.n_nodes
-    sizes = {"node_positions": n_fingers * n_nodes * dim, "node_velocities": n_fingers * n_nodes * dim,
-             "natural_curvature": n_fingers, "normal_forces": n_fingers * n_nodes, "finger_forces": n_fingers,
-             "finger_gaps": n_fingers, "touching": n_fingers, "fragile_force": 1, "object_radius": 1,
-             "object_offset": 3,
-             "object_velocity": 3, "episode_fraction": 1}
+    nodes, fingers = n_fingers * n_nodes * dim, np.ones(n_fingers)
+    return {
+        "node_positions": (np.full(nodes, -_POSITION_BOUND), np.full(nodes, _POSITION_BOUND)),
+        "node_velocities": (np.full(nodes, -_VELOCITY_BOUND), np.full(nodes, _VELOCITY_BOUND)),
+        "natural_curvature": (task.curvature_range[0] * fingers, task.curvature_range[1] * fingers),
+        "normal_forces": (np.zeros(n_fingers * n_nodes), np.full(n_fingers * n_nodes, _FORCE_BOUND)),
+        "finger_forces": (0 * fingers, _FORCE_BOUND * fingers),
+        "finger_gaps": (0 * fingers, _OBJECT_BOUND * fingers),
+        "touching": (0 * fingers, fingers),
+        "fragile_force": (np.array([OPTION_RANGES["fragile_force"][0]]), np.array([OPTION_RANGES["fragile_force"][1]])),
+        "object_radius": (np.array([OPTION_RANGES["object_radius"][0]]), np.array([OPTION_RANGES["object_radius"][1]])),
+        "object_offset": (np.full(3, -_OBJECT_BOUND), np.full(3, _OBJECT_BOUND)),
+        "object_velocity": (np.full(3, -_VELOCITY_BOUND), np.full(3, _VELOCITY_BOUND)),
+        "episode_fraction": (np.zeros(1), np.ones(1)),
+    }
+
+
+def observed_parts(task: GraspTask) -> tuple[str, ...]:
+    """The names of the parts an observation holds, in order (``GraspTask.observation``)."""
+    names = tuple(_part_bounds(task))
+    return names if task.observation == "full" else tuple(n for n in names if n not in _NODE_PARTS)
+
+
+def observation_slices(task: GraspTask) -> dict[str, slice]:
+    """Where each part of the observation lies (see the env's spec sheet); the sizes follow the task's gripper,
+    and the parts its ``observation`` setting."""
+    bounds = _part_bounds(task)
+    sizes = {name: len(bounds[name][0]) for name in observed_parts(task)}
     ends = np.cumsum(list(sizes.values()))
     return {name: slice(int(end - size), int(end)) for (name, size), end in zip(sizes.items(), ends, strict=True)}
 
 
 def observation_bounds(task: GraspTask) -> tuple[np.ndarray, np.ndarray]:
     """The observation's low and high bounds (float32), part by part as in the spec sheet."""
-    dim = 2 if task.model == "planar" else 3
-    n_fingers, n_nodes = task.gripper.n_fingers, task.gripper.finger.n_nodes
-    nodes = n_fingers * n_nodes * dim
-    low = np.concatenate([np.full(nodes, -_POSITION_BOUND), np.full(nodes, -_VELOCITY_BOUND),
-                          np.full(n_fingers, task.curvature_range[0]), np.zeros(n_fingers * n_nodes),
-                          np.zeros(3 * n_fingers), [OPTION_RANGES["fragile_force"][0]],
-                          [OPTION_RANGES["object_radius"][0]], np.full(3, -_OBJECT_BOUND), np.full(3, -_VELOCITY_BOUND),
-                          [0.0]])
-    high = np.concatenate([np.full(nodes, _POSITION_BOUND), np.full(nodes, _VELOCITY_BOUND),
-                           np.full(n_fingers, task.curvature_range[1]), np.full(n_fingers * n_nodes, _FORCE_BOUND),
-                           np.full(n_fingers, _FORCE_BOUND), np.full(n_fingers, _OBJECT_BOUND), np.ones(n_fingers),
-                           [OPTION_RANGES["fragile_force"][1]],
-                           [OPTION_RANGES["object_radius"][1]], np.full(3, _OBJECT_BOUND), np.full(3, _VELOCITY_BOUND),
-                           [1.0]])
-    return low.astype(np.float32), high.astype(np.float32)
+    bounds = _part_bounds(task)
+    names = observed_parts(task)
+    return tuple(np.concatenate([bounds[name][k] for name in names]).astype(np.float32) for k in (0, 1))
 
 
 def _observations(batch: GraspBatch, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     """(B, obs_dim) float32, a new array, clipped to the space (only a failing solver could leave it)."""
-    parts = np.concatenate(list(batch.observation_parts().values()), axis=1)
-    return np.clip(np.nan_to_num(parts, nan=0.0), low, high).astype(np.float32)
+    parts = batch.observation_parts()
+    values = np.concatenate([parts[name] for name in observed_parts(batch.task)], axis=1)
+    return np.clip(np.nan_to_num(values, nan=0.0), low, high).astype(np.float32)
 
 
 def _check_actions(action, shape: tuple[int, ...]) -> np.ndarray:
@@ -145,7 +162,10 @@ class SoftGripperUnderwaterEnv(gym.Env):
     episode fraction  1           elapsed time over ``episode_duration``               1       0 … 1
     ================  ==========  ===================================================  ======  ===============
 
-    Values are clipped to the bounds, which only a failing solve could reach.
+    Values are clipped to the bounds, which only a failing solve could reach. With ``observation="sensors"``
+    (:attr:`~soft_gripper_env.grasp_task.GraspTask.observation`) the node positions, node velocities and normal
+    forces are left out: what remains (4F + 9 values, 21 for the paper's gripper) is what a real gripper measures or
+    is told, and it has the same size and meaning in both rod models, so a policy trained in one runs in the other.
 
     **Episode.** Each reset draws (by ``self.np_random``) the specimen's radius (0.045–0.06 m), density (990–1030
     kg/m³), fragility limit (1–4 N) and start (``start_point`` (0.0, 0.0, −0.1) m ± (0.015, 0.015, 0.01) m, below
@@ -449,4 +469,4 @@ def _masked(infos: dict[str, Any]) -> dict[str, Any]:
 
 
 __all__ = ["SoftGripperUnderwaterEnv", "SoftGripperUnderwaterVectorEnv", "DEFAULT_MAX_EPISODE_STEPS",
-           "observation_slices", "observation_bounds"]
+           "observed_parts", "observation_slices", "observation_bounds"]

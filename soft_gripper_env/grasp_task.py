@@ -35,6 +35,9 @@ from .physics import (
 )
 
 MODELS = ("planar", "3d")
+OBSERVATIONS = ("full", "sensors")
+"""What an observation holds: ``"full"``, the fingers' node states and per-node forces with the sensors' readings;
+``"sensors"``, only what a real gripper measures or is told (the same size in both rod models)."""
 
 
 @dataclass(frozen=True)
@@ -76,6 +79,12 @@ class GraspTask:
 
     model: str = "3d"
     """Rod model of the fingers: ``"planar"`` or ``"3d"``."""
+    observation: str = "full"
+    """What the observation holds (the env's spec sheet): ``"full"``, every node's position and velocity and the
+    per-node contact forces, then the sensors' readings; ``"sensors"``, the readings alone (per finger: κ̄, force,
+    gap and touching; the specimen's fragility limit, radius, offset and velocity; the episode fraction), which
+    a real gripper has and which do not depend on the rod model, so a policy trained in one model runs in the
+    other."""
     gripper: GripperDesign = field(default_factory=lambda: GripperDesign(paper_finger()))
     """The gripper: its fingers (design, count and directions) set the sizes of the action and the observation.
     The paper's three fingers of 20 nodes by default."""
@@ -166,6 +175,8 @@ class GraspTask:
     def __post_init__(self) -> None:
         if self.model not in MODELS:
             raise ValueError(f"GraspTask.model = {self.model!r} is not one of 'planar', '3d'")
+        if self.observation not in OBSERVATIONS:
+            raise ValueError(f"GraspTask.observation = {self.observation!r} is not one of 'full', 'sensors'")
         if not isinstance(self.gripper, GripperDesign):
             raise ValueError(f"GraspTask.gripper must be a GripperDesign, got {type(self.gripper).__name__}")
         check_range("GraspTask", "physics_dt", self.physics_dt, "s", 0.0, 0.05, high_inclusive=True)

@@ -85,8 +85,15 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     assert {"success_rate", "mean_return", "mean_peak_contact_force_N", "endings"} <= set(result)
     assert result["episodes"] == 2 and result["first_seed"] == 5 and sum(result["endings"].values()) == 2
     assert "| policy | model |" in out.stdout
+    assert config["observation"] == config["task"]["observation"] == "sensors" and result["observation"] == "sensors"
+    out = run_script("-m", "agents.evaluate", "--policy", str(tmp_path), "--episodes", "1", "--model", "planar",
+                     "--json", str(tmp_path / "planar.json"))  # the sensors' readings are the same in both models
+    assert out.returncode == 0, out.stderr
+    assert json.loads((tmp_path / "planar.json").read_text())["model"] == "planar"
+    config["task"]["observation"] = "full"  # as if trained on 3-D node states: it cannot act in the planar model
+    (tmp_path / "config.json").write_text(json.dumps(config))
     out = run_script("-m", "agents.evaluate", "--policy", str(tmp_path), "--episodes", "1", "--model", "planar")
-    assert out.returncode == 2 and "a policy acts in the rod model it was trained in" in out.stderr
+    assert out.returncode == 2 and "acts only in the rod model it was trained in" in out.stderr
 
 
 def test_evaluate_runs_seeds_as_single_envs_do():

@@ -279,6 +279,7 @@ def test_bad_reset_options_raise(env, options, pattern):
 
 @pytest.mark.parametrize("settings_, pattern", [
     ({"model": "2d"}, r"GraspTask\.model = '2d' is not one of 'planar', '3d'"),
+    ({"observation": "nodes"}, r"GraspTask\.observation = 'nodes' is not one of 'full', 'sensors'"),
     ({"control_dt": 0.0125}, r"control_dt = 0\.0125 s must be a whole multiple of physics_dt"),
     ({"physics_dt": 0.0}, r"physics_dt = 0\.0 s is outside the allowed range"),
     ({"physics_dt": 0.06, "control_dt": 0.06}, r"physics_dt = 0\.06 s is outside the allowed range \(0, 0\.05\] s"),
@@ -493,6 +494,33 @@ def test_three_dimensional_fingers():
         assert env.observation_space.contains(obs)
     tips = obs[layout["node_positions"]].reshape(3, 20, 3)[:, -1]
     assert np.all(tips[:, 2] < -1e-3)  # every fingertip curls down
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_sensors_observation_is_the_full_ones_readings_and_the_same_size_in_both_models(model):
+    """The same episode observed both ways: the sensors' observation is the full one without the node parts, value
+    for value, and its layout does not depend on the rod model."""
+    full, sensors = (SoftGripperUnderwaterEnv(model=model, observation=o) for o in ("full", "sensors"))
+    full_layout = observation_slices(full.task)
+    sensors_layout = observation_slices(sensors.task)
+    assert sensors.observation_space.shape == (21,)
+    assert sensors_layout == observation_slices(GraspTask(model="3d" if model == "planar" else "planar",
+                                                          observation="sensors"))
+    assert set(full_layout) - set(sensors_layout) == {"node_positions", "node_velocities", "normal_forces"}
+    policy = ReactivePolicy(full.task)
+    observations = [env.reset(seed=SUCCESS_SEED)[0] for env in (full, sensors)]
+    for _ in range(30):
+        action = policy(observations[0])
+        observations = [env.step(action)[0] for env in (full, sensors)]
+        assert sensors.observation_space.contains(observations[1])
+    for name, part in sensors_layout.items():
+        np.testing.assert_array_equal(observations[1][part], observations[0][full_layout[name]], err_msg=name)
+    assert observations[1][sensors_layout["finger_forces"]].max() > 0  # the fingers touched: a real comparison
+    low, high = observation_bounds(sensors.task)
+    full_low, full_high = observation_bounds(full.task)
+    for name, part in sensors_layout.items():
+        np.testing.assert_array_equal(low[part], full_low[full_layout[name]])
+        np.testing.assert_array_equal(high[part], full_high[full_layout[name]])
 
 
 def test_human_render_mode_draws_without_a_display(monkeypatch):
