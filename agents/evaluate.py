@@ -128,18 +128,27 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
     if config_file.exists():
         observation = json.loads(config_file.read_text()).get("task", {}).get("observation", "full")
 
+    act = ppo_policy(model, normalize, f"the policy in {model_dir}")
+    act.observation_size = size
+    act.observation = observation
+    return act
+
+
+def ppo_policy(model, normalize, name: str = "the policy") -> Callable[[np.ndarray], np.ndarray]:
+    """A PPO model acting deterministically on one observation or a batch, through ``normalize`` (a VecNormalize
+    whose statistics it reads and never updates)."""
+    size = normalize.obs_rms.mean.shape[0]
+
     def act(observation: np.ndarray) -> np.ndarray:
         observation = np.asarray(observation)
         if observation.shape[-1] != size:
-            raise ValueError(f"the policy in {model_dir} takes observations of {size} values, got "
-                             f"{observation.shape[-1]} (observation = 'full' holds node states of 2 components "
-                             f"in the planar model and 3 in 3-D; 'sensors' is the same in both)")
+            raise ValueError(f"{name} takes observations of {size} values, got {observation.shape[-1]} (observation "
+                             f"= 'full' holds node states of 2 components in the planar model and 3 in 3-D; "
+                             f"'sensors' is the same in both)")
         batch = observation.reshape(-1, observation.shape[-1])
         action, _ = model.predict(normalize.normalize_obs(batch), deterministic=True)
         return action.reshape(observation.shape[:-1] + action.shape[-1:])
 
-    act.observation_size = size
-    act.observation = observation
     return act
 
 

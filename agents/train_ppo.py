@@ -26,7 +26,8 @@ from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
-from agents.evaluate import evaluate, load_ppo
+from agents.evaluate import evaluate, load_ppo, ppo_policy
+from agents.learning_curves import load_run, plot_learning_curves
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
 from agents.scripted import RampPolicy, ReactivePolicy
 from soft_gripper_env.grasp_task import GraspTask
@@ -34,6 +35,11 @@ from soft_gripper_env.grasp_task import GraspTask
 HELD_OUT_SEED = 1_000_000
 """First seed of the held-out evaluation: training episodes are drawn from the generators of seeds seed … seed +
 num_envs − 1, never from these."""
+VALIDATION_SEED = 500_000
+"""First seed of the validation episodes that measure the deterministic policy during training (the learning
+curves): neither training's nor the held-out evaluation's."""
+VALIDATION_EPISODES = 64
+"""Validation episodes per measure (``--validation-episodes``)."""
 PPO_SETTINGS = {"n_steps": 128, "n_epochs": 10, "learning_rate": 3e-4, "gamma": 0.99, "gae_lambda": 0.95,
                 "ent_coef": 0.0, "clip_range": 0.2}
 """PPO's hyperparameters (batch size: 1024 or the rollout, whichever is smaller)."""
@@ -46,21 +52,33 @@ docs/environment.md)."""
 
 
 class ProgressAndCurve(BaseCallback):
-    """A tqdm bar over the timesteps, and every finished episode's return and success (from VecMonitor) with the
-    env steps and wall time at its end, also logged to TensorBoard as ``rollout/success_rate``."""
+    """A tqdm bar over the timesteps; every finished training episode's return and success (from VecMonitor) with
+    the env steps and training wall time at its end, also logged to TensorBoard as ``rollout/success_rate``; and
+    every ``validate_every`` steps the deterministic policy's success, return and peak finger force on
+    ``episodes`` validation seeds from ``VALIDATION_SEED`` (logged as ``validation/success_rate``). Training wall
+    time leaves out the validations' own time."""
 
-    def __init__(self, total: int) -> None:
+    def __init__(self, total: int, validate_every: int = 0, episodes: int = VALIDATION_EPISODES,
+                 num_threads: int = 1, **settings) -> None:
         super().__init__()
-        self.total = total
+        self.total, self.validate_every, self.episodes, self.settings = total, validate_every, episodes, settings
+        self.num_threads = min(num_threads, episodes)
         self.curve: list[tuple[int, float, float, float]] = []
+        self.validation: list[dict] = []
+        self.validating_s = 0.0
+
+    def training_wall(self) -> float:
+        """Seconds spent training so far [s], without the validations."""
+        return time.perf_counter() - self.start - self.validating_s
 
     def _on_training_start(self) -> None:
         self.start = time.perf_counter()
         self.bar = tqdm(total=self.total, desc="PPO", unit="step")
 
     def _on_step(self) -> bool:
-        self.bar.update(self.training_env.num_envs)
-        wall = time.perf_counter() - self.start
+        num_envs = self.training_env.num_envs
+        self.bar.update(num_envs)
+        wall = self.training_wall()
         for info in self.locals["infos"]:
             if "episode" in info:
                 self.curve.append((self.num_timesteps, wall, float(info["episode"]["r"]),
@@ -69,8 +87,24 @@ class ProgressAndCurve(BaseCallback):
             recent = self.curve[-100:]
             success = float(np.mean([s for *_, s in recent]))
             self.logger.record("rollout/success_rate", success)
-            self.bar.set_postfix(ret=f"{np.mean([r for _, _, r, _ in recent]):.1f}", success=f"{success:.2f}")
+            self.bar.set_postfix(ret=f"{np.mean([r for _, _, r, _ in recent]):.1f}", success=f"{success:.2f}",
+                                 validation=f"{self.validation[-1]['success_rate']:.2f}" if self.validation else "-")
+        if self.validate_every and self.num_timesteps // self.validate_every > (self.num_timesteps - num_envs) \
+                // self.validate_every:
+            self.validate()
         return True
+
+    def validate(self) -> None:
+        began = time.perf_counter()
+        policy = ppo_policy(self.model, self.training_env, "the policy in training")
+        result = evaluate(policy, self.episodes, VALIDATION_SEED, progress=False, num_envs=self.episodes,
+                          num_threads=self.num_threads, **self.settings)
+        point = {"steps": self.num_timesteps, "training_wall_s": self.training_wall(),
+                 **{key: result[key] for key in ("success_rate", "mean_return", "mean_peak_contact_force_N")}}
+        self.validation.append(point)
+        self.logger.record("validation/success_rate", point["success_rate"])
+        self.logger.record("validation/mean_peak_contact_force_N", point["mean_peak_contact_force_N"])
+        self.validating_s += time.perf_counter() - began
 
     def _on_training_end(self) -> None:
         self.bar.close()
@@ -89,12 +123,18 @@ def main(argv: list[str] | None = None) -> dict:
                         help="what the policy observes (GraspTask.observation; default sensors: the same in both rod "
                              "models, so the policy also runs in the other)")
     parser.add_argument("--eval-episodes", type=int, default=200, help="held-out episodes at the end (0: none)")
+    parser.add_argument("--validate-every", type=int, default=50_000,
+                        help="env steps between measures of the deterministic policy on validation seeds, the "
+                             "learning curve (0: none)")
+    parser.add_argument("--validation-episodes", type=int, default=VALIDATION_EPISODES,
+                        help=f"episodes per validation (default {VALIDATION_EPISODES})")
     args = parser.parse_args(argv)
-    for name in ("timesteps", "num_envs", "num_threads"):
+    for name in ("timesteps", "num_envs", "num_threads", "validation_episodes"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} = {getattr(args, name)} must be at least 1")
-    if args.eval_episodes < 0:
-        parser.error(f"--eval-episodes = {args.eval_episodes} must be at least 0")
+    for name in ("eval_episodes", "validate_every"):
+        if getattr(args, name) < 0:
+            parser.error(f"--{name.replace('_', '-')} = {getattr(args, name)} must be at least 0")
     if args.num_threads > args.num_envs:
         parser.error(f"--num-threads = {args.num_threads} must be at most --num-envs = {args.num_envs}")
     args.out.mkdir(parents=True, exist_ok=True)
@@ -106,21 +146,22 @@ def main(argv: list[str] | None = None) -> dict:
     model = PPO("MlpPolicy", env, batch_size=min(1024, PPO_SETTINGS["n_steps"] * args.num_envs), **PPO_SETTINGS,
                 policy_kwargs=POLICY_SETTINGS, seed=args.seed, verbose=0, device="cpu",
                 tensorboard_log=str(args.out / "tensorboard"))
-    progress = ProgressAndCurve(args.timesteps)
+    progress = ProgressAndCurve(args.timesteps, args.validate_every, model=args.model, observation=args.observation,
+                                episodes=args.validation_episodes, num_threads=args.num_threads)
     checkpoints = CheckpointCallback(save_freq=max(1, 100_000 // args.num_envs),
                                      save_path=str(args.out / "checkpoints"), save_vecnormalize=True)
     model.learn(args.timesteps, callback=[progress, checkpoints], tb_log_name=f"ppo_seed{args.seed}")
-    wall = time.perf_counter() - progress.start
+    wall = progress.training_wall()
     model.save(args.out / "ppo_model.zip")
     env.save(str(args.out / "vecnormalize.pkl"))
     config = {"timesteps": args.timesteps, "seed": args.seed, "num_envs": args.num_envs,
               "num_threads": args.num_threads, "model": args.model, "observation": args.observation,
-              "wall_s": wall, "ppo": PPO_SETTINGS,
+              "training_wall_s": wall, "validation_wall_s": progress.validating_s, "ppo": PPO_SETTINGS,
               "policy": POLICY_SETTINGS, "task": json.loads(json.dumps(asdict(task), default=repr))}
     (args.out / "config.json").write_text(json.dumps(config, indent=1))
-    (args.out / "curve.json").write_text(json.dumps(progress.curve))
+    (args.out / "curve.json").write_text(json.dumps({"episodes": progress.curve, "validation": progress.validation}))
 
-    results = {"timesteps": args.timesteps, "seed": args.seed, "wall_s": wall}
+    results = {"timesteps": args.timesteps, "seed": args.seed, "training_wall_s": wall}
     if args.eval_episodes:
         for name, policy in (("ppo", load_ppo(args.out)), ("ramp", RampPolicy(task)),
                              ("reactive", ReactivePolicy(task))):
@@ -131,40 +172,8 @@ def main(argv: list[str] | None = None) -> dict:
             print(f"{name:>9}: success {result['success_rate']:.3f}, return {result['mean_return']:.1f}, "
                   f"peak force {result['mean_peak_contact_force_N']:.2f} N")
         (args.out / "evaluation.json").write_text(json.dumps(results, indent=2))
-    plot_curve(progress.curve, results, args.out / "learning_curve.png")
+    plot_learning_curves([load_run(args.out)], args.out / "learning_curve.png")
     return results
-
-
-def plot_curve(curve, results: dict, path: Path) -> None:
-    """Training episodes' success (moving mean) against env steps and against wall time, with the scripted
-    controllers' held-out success as lines where evaluated."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
-    if curve:
-        steps, wall, _, success = np.array(curve).T
-        window = max(1, len(success) // 40)
-        smooth = np.convolve(success, np.ones(window) / window, mode="valid")
-        axes[0].plot(steps[window - 1:], smooth, label="PPO, training episodes (moving mean)")
-        axes[1].plot(wall[window - 1:] / 60, smooth)
-    for ax in axes:
-        for name, style in (("ramp", "--"), ("reactive", ":")):
-            if name in results:
-                ax.axhline(results[name]["success_rate"], ls=style, color="0.3", label=f"{name} (held-out seeds)")
-        if "ppo" in results:
-            ax.axhline(results["ppo"]["success_rate"], ls="-.", color="C1", label="PPO (held-out seeds)")
-        ax.grid(True, alpha=0.3)
-        ax.set_ylim(0, 1)
-    axes[0].set_xlabel("environment steps")
-    axes[1].set_xlabel("wall time [min]")
-    axes[0].set_ylabel("success rate")
-    axes[0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

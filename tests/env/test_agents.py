@@ -68,7 +68,7 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     from agents import train_ppo
 
     results = train_ppo.main(["--out", str(tmp_path), "--timesteps", "256", "--num-envs", "4",
-                              "--eval-episodes", "1"])
+                              "--eval-episodes", "1", "--validate-every", "128", "--validation-episodes", "2"])
     saved = json.loads((tmp_path / "evaluation.json").read_text())
     for name in ("ppo", "ramp", "reactive"):
         assert 0.0 <= saved[name]["success_rate"] <= 1.0 and np.isfinite(saved[name]["mean_return"])
@@ -78,6 +78,11 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     assert (tmp_path / "vecnormalize.pkl").exists() and (tmp_path / "ppo_model.zip").exists()
     assert any((tmp_path / "tensorboard").rglob("events.out.tfevents.*"))
     assert (tmp_path / "learning_curve.png").stat().st_size > 5000
+    curve = json.loads((tmp_path / "curve.json").read_text())
+    steps = [point["steps"] for point in curve["validation"]]  # PPO stops at the end of a rollout (4 × 128)
+    assert steps == [128, 256, 384, 512] and len(curve["episodes"]) >= 4  # each env ended an 80-step episode
+    assert all(0.0 <= point["success_rate"] <= 1.0 for point in curve["validation"])
+    assert 0 < config["training_wall_s"] and config["validation_wall_s"] > 0
     out = run_script("-m", "agents.evaluate", "--policy", str(tmp_path), "--episodes", "2", "--seed", "5",
                      "--json", str(tmp_path / "eval.json"))
     assert out.returncode == 0, out.stderr
