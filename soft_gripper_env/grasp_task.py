@@ -57,9 +57,10 @@ class RewardWeights:
     rest: float = 0.5
     """Object at rest relative to the palm, 1 − tanh(|v|/rest_speed); only while every finger touches it."""
     pressure: float = 0.5
-    """Penalty for pressing near the specimen's fragility limit: the largest finger force F over the limit F_max,
-    clip((F/F_max − 0.7)/0.3, 0, 1), zero up to 70 % of the limit and the full weight at it. Success forbids only
-    F > F_max; this warns before it, so that a policy learns the margin and not the edge."""
+    """Penalty for pressing near the specimen's fragility limit: with F the largest sustained finger force, F_max
+    the limit and c the task's ``pressure_onset``, clip((F/F_max − c)/(1 − c), 0, 1), zero up to the onset and the
+    full weight at the limit. Success forbids only F > F_max; this warns before it, so that a policy learns the
+    margin and not the edge."""
     effort: float = 0.05
     """Penalty mean(action²)."""
     harm: float = 20.0
@@ -146,6 +147,9 @@ class GraspTask:
     """The specimen's fragility limit [N], drawn per episode: the largest force one finger may press on it (the sum
     of the finger's normal reactions, averaged over a control interval) without harming it. Pressing harder harms
     it and ends the episode as a failure. The limit is observed: a gripper is told what it is sent to take."""
+    pressure_onset: float = 0.7
+    """Fraction of the fragility limit (dimensionless, in [0, 1)) above which the reward's pressure penalty
+    grows, reaching its full weight at the limit."""
     sustained_force_time: float = 0.2
     """Time constant [s] of a finger's sustained force: its force, averaged over a control interval, through a
     first-order low-pass filter. The fragility limit bounds it, and a finger touches while it is at least
@@ -219,6 +223,8 @@ class GraspTask:
         check_range("GraspTask", "sustained_force_time", self.sustained_force_time, "s", 0.0, 100.0,
                     low_inclusive=True)
         _check_interval("fragile_force", self.fragile_force, "N", *OPTION_RANGES["fragile_force"])
+        check_range("GraspTask", "pressure_onset", self.pressure_onset, "(dimensionless)", 0.0, 1.0,
+                    low_inclusive=True)
         _check_interval("gust_speed", self.gust_speed, "m/s", 0.0, 0.5)
         _check_interval("gust_start", self.gust_start, "s", 0.0, 1e3)
         last_gust_end = self.gust_start[1] + self.gust_duration
@@ -572,7 +578,8 @@ class GraspBatch:
             "contact": weights.contact * self.touching.mean(axis=1),
             "hold": weights.hold * grasped * (1.0 - np.tanh(distance / task.hold_distance)),
             "rest": weights.rest * grasped * (1.0 - np.tanh(speed / task.rest_speed)),
-            "pressure": -weights.pressure * np.clip((load - 0.7) / 0.3, 0.0, 1.0),
+            "pressure": -weights.pressure * np.clip((load - task.pressure_onset) / (1.0 - task.pressure_onset), 0.0,
+                                                    1.0),
             "effort": -weights.effort * np.mean(action**2, axis=1),
             "harm": -weights.harm * harm,
             "success": weights.success * succeeded,

@@ -74,7 +74,7 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
         assert 0.0 <= saved[name]["success_rate"] <= 1.0 and np.isfinite(saved[name]["mean_return"])
     assert results["ppo"] == saved["ppo"]
     config = json.loads((tmp_path / "config.json").read_text())
-    assert config["timesteps"] == 256 and config["task"]["model"] == "3d"
+    assert config["timesteps"] == 256 and config["task"]["model"] == "planar"
     assert (tmp_path / "vecnormalize.pkl").exists() and (tmp_path / "ppo_model.zip").exists()
     assert any((tmp_path / "tensorboard").rglob("events.out.tfevents.*"))
     assert (tmp_path / "learning_curve.png").stat().st_size > 5000
@@ -84,18 +84,19 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     assert all(0.0 <= point["success_rate"] <= 1.0 for point in curve["validation"])
     assert 0 < config["training_wall_s"] and config["validation_wall_s"] > 0
     out = run_script("-m", "agents.evaluate", "--policy", str(tmp_path), "--episodes", "2", "--seed", "5",
-                     "--json", str(tmp_path / "eval.json"))
+                     "--json", str(tmp_path / "eval.json"))  # trained planar, acting in 3-D: the same sensors
     assert out.returncode == 0, out.stderr
     result = json.loads((tmp_path / "eval.json").read_text())
     assert {"success_rate", "mean_return", "mean_peak_contact_force_N", "endings"} <= set(result)
     assert result["episodes"] == 2 and result["first_seed"] == 5 and sum(result["endings"].values()) == 2
+    assert result["model"] == "3d"
     assert "| policy | model |" in out.stdout
     assert config["observation"] == config["task"]["observation"] == "sensors" and result["observation"] == "sensors"
     out = run_script("-m", "agents.evaluate", "--policy", str(tmp_path), "--episodes", "1", "--model", "planar",
-                     "--json", str(tmp_path / "planar.json"))  # the sensors' readings are the same in both models
+                     "--json", str(tmp_path / "planar.json"))
     assert out.returncode == 0, out.stderr
     assert json.loads((tmp_path / "planar.json").read_text())["model"] == "planar"
-    config["task"]["observation"] = "full"  # as if trained on 3-D node states: it cannot act in the planar model
+    config["task"]["observation"] = "full"  # as if trained on node states: it cannot act in the other model
     (tmp_path / "config.json").write_text(json.dumps(config))
     out = run_script("-m", "agents.evaluate", "--policy", str(tmp_path), "--episodes", "1", "--model", "planar")
     assert out.returncode == 2 and "acts only in the rod model it was trained in" in out.stderr
