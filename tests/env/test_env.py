@@ -290,6 +290,7 @@ def test_bad_reset_options_raise(env, options, pattern):
     ({"fragile_force": (-1.0, 1.0)}, r"fragile_force = -1\.0 N is outside"),
     ({"object_friction": -0.1}, r"object_friction = -0\.1 is outside the allowed range \[0, inf\]"),
     ({"newton": 1e-6}, r"GraspTask\.newton must be a NewtonSettings, got float"),
+    ({"pressure_onset": 1.0}, r"GraspTask\.pressure_onset = 1\.0 \(dimensionless\) is outside the allowed range"),
     ({"friction_passes": -1}, r"GraspTask\.friction_passes = -1 is outside the allowed range: None or an integer"),
     ({"friction_passes": 2.5}, r"GraspTask\.friction_passes = 2\.5 is outside the allowed range"),
 ])
@@ -469,6 +470,28 @@ def test_pressing_above_the_fragility_limit_harms_and_ends_the_episode():
     assert info["reward_terms"]["harm"] == -GraspTask().reward.harm
     sustained = env.unwrapped._batch.sustained_force
     assert sustained.max() > 0.05
+
+
+@pytest.mark.parametrize("onset", [0.0, 0.1, 0.7])
+def test_the_pressure_penalty_grows_from_its_onset_to_the_limit(onset):
+    """The pressure term is −weight · clip((F/F_max − c)/(1 − c), 0, 1), F the largest sustained finger force, at
+    every step of a reactive grasp, which pays it only for onsets below its grip's load."""
+    env = SoftGripperUnderwaterEnv(model="planar", pressure_onset=onset)
+    policy = ReactivePolicy(env.task)
+    obs, _ = env.reset(seed=SUCCESS_SEED)
+    terms, loads = [], []
+    for _ in range(60):
+        obs, _, terminated, truncated, info = env.step(policy(obs))
+        load = env._batch.sustained_force[0].max() / info["fragile_force_N"]
+        expected = -env.task.reward.pressure * min(max((load - onset) / (1.0 - onset), 0.0), 1.0)
+        assert info["reward_terms"]["pressure"] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+        terms.append(info["reward_terms"]["pressure"])
+        loads.append(load)
+        assert not terminated
+    assert 0.05 < max(loads) < 0.7  # a grip, well below the limit
+    assert (min(terms) < 0.0) == (onset < max(loads))
+    if onset == 0.0:
+        assert min(terms) == pytest.approx(-env.task.reward.pressure * max(loads))
 
 
 def test_object_swept_away_by_the_current_terminates_the_episode():
