@@ -122,15 +122,11 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
         normalize = pickle.load(f)
     normalize.training = False
 
-    size = normalize.obs_rms.mean.shape[0]
     config_file = model_dir / "config.json"
-    observation = "full"
-    if config_file.exists():
-        observation = json.loads(config_file.read_text()).get("task", {}).get("observation", "full")
-
     act = ppo_policy(model, normalize, f"the policy in {model_dir}")
-    act.observation_size = size
-    act.observation = observation
+    act.observation = "full"
+    if config_file.exists():
+        act.observation = json.loads(config_file.read_text()).get("task", {}).get("observation", "full")
     return act
 
 
@@ -149,6 +145,7 @@ def ppo_policy(model, normalize, name: str = "the policy") -> Callable[[np.ndarr
         action, _ = model.predict(normalize.normalize_obs(batch), deterministic=True)
         return action.reshape(observation.shape[:-1] + action.shape[-1:])
 
+    act.observation_size = size
     return act
 
 

@@ -50,10 +50,14 @@ def _part_bounds(task: GraspTask) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     }
 
 
+def _observed(task: GraspTask, names):
+    """Those of ``names`` (in the full observation's order) that an observation of ``task`` holds."""
+    return tuple(n for n in names if task.observation == "full" or n not in _NODE_PARTS)
+
+
 def observed_parts(task: GraspTask) -> tuple[str, ...]:
     """The names of the parts an observation holds, in order (``GraspTask.observation``)."""
-    names = tuple(_part_bounds(task))
-    return names if task.observation == "full" else tuple(n for n in names if n not in _NODE_PARTS)
+    return _observed(task, _part_bounds(task))
 
 
 def observation_slices(task: GraspTask) -> dict[str, slice]:
@@ -74,8 +78,8 @@ def observation_bounds(task: GraspTask) -> tuple[np.ndarray, np.ndarray]:
 
 def _observations(batch: GraspBatch, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     """(B, obs_dim) float32, a new array, clipped to the space (only a failing solver could leave it)."""
-    parts = batch.observation_parts()
-    values = np.concatenate([parts[name] for name in observed_parts(batch.task)], axis=1)
+    parts = batch.observation_parts()  # in the full observation's order; the bounds are not rebuilt every step
+    values = np.concatenate([parts[name] for name in _observed(batch.task, parts)], axis=1)
     return np.clip(np.nan_to_num(values, nan=0.0), low, high).astype(np.float32)
 
 
