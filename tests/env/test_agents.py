@@ -120,6 +120,25 @@ def test_the_shipped_policy_loads_and_beats_random(model):
     assert trained["mean_return"] > random["mean_return"] + 30
 
 
+def test_learning_curves_of_several_runs_and_a_folder_without_a_curve(tmp_path):
+    """Two runs' validation curves make one figure (each run, their mean and spread); a folder that train_ppo did
+    not write is refused by name."""
+    for seed, rates in ((0, [0.1, 0.5, 0.7]), (1, [0.2, 0.4, 0.9])):
+        run = tmp_path / f"seed{seed}"
+        run.mkdir()
+        validation = [{"steps": 50_000 * (k + 1), "training_wall_s": 300.0 * (k + 1), "success_rate": rate,
+                       "mean_return": 0.0, "mean_peak_contact_force_N": 1.0} for k, rate in enumerate(rates)]
+        (run / "curve.json").write_text(json.dumps({"episodes": [], "validation": validation}))
+        (run / "evaluation.json").write_text(json.dumps({"ppo": {"success_rate": rates[-1]},
+                                                         "reactive": {"success_rate": 0.8}}))
+    out = run_script("-m", "agents.learning_curves", str(tmp_path / "seed0"), str(tmp_path / "seed1"),
+                     "--out", str(tmp_path / "curves.png"))
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "curves.png").stat().st_size > 20_000
+    out = run_script("-m", "agents.learning_curves", str(tmp_path), "--out", str(tmp_path / "none.png"))
+    assert out.returncode == 2 and "has no curve.json" in out.stderr and not (tmp_path / "none.png").exists()
+
+
 def test_evaluate_runs_seeds_as_single_envs_do():
     """Batched evaluation gives each seed the episode a single env with that seed gives: the same return."""
     from agents.evaluate import ENDINGS, evaluate
