@@ -459,43 +459,13 @@ class GraspBatch:
     def step(self, action: np.ndarray, active: np.ndarray) -> StepOutcome:
         """Advances the episodes where ``active`` (B,) by one control interval with ``action`` (B, F) in [−1, 1]."""
         task = self.task
-        rate = task.curvature_rate(action)
-        low, high = task.curvature_range
-        failed = np.zeros(self.batch_size, dtype=bool)
-        iterations = np.zeros(self.batch_size, dtype=np.int64)
-        running = active.copy()
-        impulse = np.zeros_like(self.normal_force)  # Σ normal reaction · Δt over the interval [N·s]
-        force_impulse = np.zeros_like(self.contact_force)  # Σ reaction · Δt [N·s]
-        for _ in range(task.substeps):
-            if not running.any():
-                break
-            result = self.sim.step(self.state, self.natural_curvature)
-            ok = result.converged & _finite(result.state)
-            failed |= running & ~ok
-            keep = running & ok
-            contact = result.contact
-            every = keep.all()  # the common case needs no masks
-            if every:
-                self.state = result.state
-            else:  # the batch's clock runs on for all
-                index = np.nonzero(keep)[0]
-                self.state = replace(put_grippers(self.state, index, take_grippers(result.state, index)),
-                                     time=result.state.time)
-            step = task.physics_dt if every else np.where(keep, task.physics_dt, 0.0)  # each episode's advance [s]
-            if contact is not None:
-                normal, reaction = np.maximum(contact.normal_reaction, 0.0), contact.reaction
-                if not every:  # a failed episode's reactions may be NaN: masked, not multiplied
-                    normal = np.where(keep[:, None, None], normal, 0.0)
-                    reaction = np.where(keep[:, None, None, None], reaction, 0.0)
-                impulse += normal * task.physics_dt
-                force_impulse += reaction * task.physics_dt
-            iterations += result.newton_iterations if every else np.where(keep, result.newton_iterations, 0)
-            self.natural_curvature = np.clip(self.natural_curvature + rate * np.reshape(step, (-1, 1)), low, high)
-            self.time += step
-            running = keep
-        self.newton_iterations = np.where(active, iterations, self.newton_iterations)
-        self.normal_force[active] = impulse[active] / task.control_dt
-        self.contact_force[active] = force_impulse[active] / task.control_dt
+        advanced = self.sim.advance(self.state, self.natural_curvature, task.curvature_rate(action), task.substeps,
+                                    task.curvature_range, running=active, clock=self.time)
+        self.state, self.natural_curvature, self.time = advanced.state, advanced.natural_curvature, advanced.clock
+        failed = advanced.failed
+        self.newton_iterations = np.where(active, advanced.newton_iterations, self.newton_iterations)
+        self.normal_force[active] = advanced.normal_impulse[active] / task.control_dt
+        self.contact_force[active] = advanced.impulse[active] / task.control_dt
 
         decay = math.exp(-task.control_dt / task.sustained_force_time) if task.sustained_force_time > 0 else 0.0
         self.sustained_force[active] = decay * self.sustained_force[active] + (1.0 - decay) * self.finger_force[active]
@@ -604,10 +574,3 @@ class GraspBatch:
             "episode_fraction": (self.time / self.task.episode_duration)[:, None],
         }
 
-
-def _finite(state: RodState) -> np.ndarray:
-    """Per gripper, whether every coordinate and the body's state are finite (B,)."""
-    ok = np.isfinite(state.q).all(axis=(1, 2, 3)) & np.isfinite(state.velocity).all(axis=(1, 2, 3))
-    if state.body_position is not None:
-        ok &= np.isfinite(state.body_position).all(axis=1) & np.isfinite(state.body_velocity).all(axis=1)
-    return ok

@@ -42,7 +42,19 @@ from .solvers.newton import (
     plain,
     predict,
 )
-from .solvers.records import ContactReport, RodState, StepResult, _set, evolve, put_grippers, record, take_grippers
+from .solvers.records import (
+    Advance,
+    ContactReport,
+    RodState,
+    StepResult,
+    _set,
+    evolve,
+    finite,
+    put_grippers,
+    record,
+    take_grippers,
+)
+from .solvers.stepping import Interval, WorkingState, commit_step, take_steps
 
 
 class BodyModel:
@@ -329,6 +341,110 @@ class Simulator:
         """
         return self._step_adaptive(state, self._natural_curvature(natural_curvature), self.scene.time_step,
                                    self.scene.newton.max_step_halvings)
+
+    def advance(self, state: RodState, natural_curvature, curvature_rate, n_steps: int,
+                curvature_range: tuple[float, float] = (-NATURAL_CURVATURE_LIMIT, NATURAL_CURVATURE_LIMIT),
+                running: np.ndarray | None = None, clock: np.ndarray | None = None) -> Advance:
+        """``n_steps`` steps of Δt from ``state``, as many calls of :meth:`step` would take them, with κ̄ (a scalar,
+        (F,) or (B, F), dimensionless) held through each step and then ramped by ``curvature_rate`` [1/s] (the same
+        shapes) within ``curvature_range``. Only the grippers ``running`` (B,) bool (default all) step; one whose
+        step fails (after halving) stops there, keeps its last good state and is reported ``failed``. Each running
+        gripper's ``clock`` (B,) [s] (default zeros) advances by Δt per step it takes. The steps stop early once
+        no gripper runs; the batch's time is that of the last step taken.
+
+        With an object, the steps run in one compiled call (:func:`~.solvers.stepping.take_steps`), leaving it only
+        for a step that needs halving, so a control interval costs one call instead of one per step."""
+        B, F, R = self.batch_size, self.n_fingers, self.n_rods
+        if not isinstance(n_steps, (int, np.integer)) or not 1 <= n_steps <= 1_000_000:
+            raise ValueError(f"Simulator.advance: n_steps = {n_steps!r} (count) is outside the allowed range "
+                             f"[1, 1000000]")
+        low, high = (float(x) for x in curvature_range)
+        if not -NATURAL_CURVATURE_LIMIT <= low <= high <= NATURAL_CURVATURE_LIMIT:
+            raise ValueError(f"Simulator.advance: curvature_range = ({low:g}, {high:g}) (dimensionless) must be "
+                             f"ordered and within [−{NATURAL_CURVATURE_LIMIT:g}, {NATURAL_CURVATURE_LIMIT:g}]")
+        rate = np.array(np.broadcast_to(curvature_rate, (B, F)), dtype=float).reshape(R)
+        if not np.all(np.isfinite(rate)):
+            raise ValueError("Simulator.advance: curvature_rate [1/s] must be finite")
+        running = np.ones(B, dtype=bool) if running is None else np.array(np.broadcast_to(running, (B,)), dtype=bool)
+        clock = np.zeros(B) if clock is None else np.array(np.broadcast_to(clock, (B,)), dtype=float)
+        interval = Interval(self._natural_curvature(natural_curvature).copy(), rate, low, high, running,
+                            np.zeros(B, dtype=bool), clock, np.zeros(B, dtype=np.int64),
+                            np.zeros((R, self.disc.n_nodes)), np.zeros((R, self.disc.n_nodes, 3)))
+        work = self._working_state(state, copy=True)
+        dt = self.scene.time_step
+        times = [state.time]
+        for _ in range(n_steps):
+            times.append(times[-1] + dt)  # the clock of successive steps, to the bit
+        k = 0
+        if self._has_object:
+            water = np.zeros((n_steps + 1, B, 3)) if self._currents is None else self._currents.at_times(times)
+            rods = self._plain_rods if work.tangent.size == 0 else \
+                self._plain_rods[:N_DESIGN_FIELDS] + (work.tangent, work.director, work.reference_twist)
+            body = None if self._body is None else self._body.plain_arrays
+        while k < n_steps and interval.running.any():
+            if self._has_object:
+                k = take_steps(k, n_steps, dt, water, work, rods, self._plain_terms, self._per_step(dt),
+                               self._plain_geometry, self._projection, body, interval)
+                if k == n_steps or not interval.running.any():
+                    break
+            self._adaptive_step(work, times[k], dt, interval)
+            k += 1
+        N = self.disc.n_nodes
+        return record(Advance, state=self._state_of(work, times[k]),
+                      natural_curvature=interval.natural_curvature.reshape(B, F), clock=interval.clock,
+                      failed=interval.failed, newton_iterations=interval.newton_iterations,
+                      normal_impulse=interval.normal_impulse.reshape(B, F, N),
+                      impulse=interval.impulse.reshape(B, F, N, 3))
+
+    def _adaptive_step(self, work: WorkingState, time: float, dt: float, interval: Interval) -> None:
+        """One step of :meth:`advance` on the adaptive path (:meth:`step`'s), committed into ``work`` and
+        ``interval`` as the compiled steps commit theirs."""
+        result = self._step_adaptive(self._state_of(work, time), interval.natural_curvature, dt,
+                                     self.scene.newton.max_step_halvings)
+        R, N = self.n_rods, self.disc.n_nodes
+        contact = result.contact
+        normal = np.zeros((R, N)) if contact is None else contact.normal_reaction.reshape(R, N)
+        reaction = np.zeros((R, N, 3)) if contact is None else contact.reaction.reshape(R, N, 3)
+        commit_step(dt, result.converged & finite(result.state), self._working_state(result.state, copy=False),
+                    result.newton_iterations, normal, reaction, work, interval)
+
+    def _working_state(self, state: RodState, copy: bool) -> WorkingState:
+        """``state``'s arrays flattened per rod for the compiled steps (:class:`~.solvers.stepping.WorkingState`):
+        copies that they may update, or views of the same arrays; fields the state lacks are zeros (an
+        acceleration, which starts Newton at the predictor, and the holds) or empty."""
+        R, N, S = self.n_rods, self.disc.n_nodes, self.disc.stride
+
+        def flat(array, shape, empty_shape, dtype=float):
+            if array is None:
+                return np.zeros(shape if empty_shape is None else empty_shape, dtype=dtype)
+            array = array.reshape(shape)
+            return np.array(array) if copy else np.ascontiguousarray(array)
+
+        return WorkingState(
+            flat(state.q, (R, N, S), None), flat(state.velocity, (R, N, S), None),
+            flat(state.acceleration, (R, N, S), None), flat(state.held, (R, N), None, bool),
+            flat(state.hold_offset, (R, N, 3), (0, 0, 3)), flat(state.tangent, (R, N - 1, 3), (0, 0, 3)),
+            flat(state.director, (R, N - 1, 3), (0, 0, 3)), flat(state.reference_twist, (R, N), (0, 0)),
+            flat(state.body_position, (-1, 3), (0, 3)), flat(state.body_velocity, (-1, 3), (0, 3)),
+            flat(state.body_orientation, (-1, 3, 3), (0, 3, 3)), flat(state.body_angular_velocity, (-1, 3), (0, 3)))
+
+    def _state_of(self, work: WorkingState, time: float) -> RodState:
+        """A :class:`~.solvers.records.RodState` at ``time`` [s] over the arrays of ``work`` (views)."""
+        B, F, N, S = self.batch_size, self.n_fingers, self.disc.n_nodes, self.disc.stride
+        shape = (B, F, N, S)
+        state = RodState(q=work.q.reshape(shape), velocity=work.velocity.reshape(shape), time=time,
+                         acceleration=work.acceleration.reshape(shape))
+        if work.tangent.size:
+            state = evolve(state, tangent=work.tangent.reshape(B, F, N - 1, 3),
+                           director=work.director.reshape(B, F, N - 1, 3),
+                           reference_twist=work.reference_twist.reshape(B, F, N))
+        if self._has_object:
+            state = evolve(state, held=work.held.reshape(B, F, N))
+        if self._body is not None:
+            state = evolve(state, hold_offset=work.hold_offset.reshape(B, F, N, 3), body_position=work.body_position,
+                           body_velocity=work.body_velocity, body_orientation=work.body_orientation,
+                           body_angular_velocity=work.body_angular_velocity)
+        return state
 
     def _step_adaptive(self, state: RodState, natural_curvature: np.ndarray, dt: float, halvings: int) -> StepResult:
         """One step of the scene's integrator; grippers whose Newton solve fails take two half steps instead, each

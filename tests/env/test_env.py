@@ -25,6 +25,7 @@ from soft_gripper_env.env import (
 )
 from soft_gripper_env.grasp_task import GraspTask
 from soft_gripper_env.physics import PAPER_BALL, NewtonSettings, paper_scene, run_ramp
+from soft_gripper_env.physics import simulator as simulator_module
 
 SUCCESS_SEED = 3
 """A seed the reactive controller takes (it succeeds on about three seeds in four)."""
@@ -215,14 +216,16 @@ def test_gymnasium_async_vector_env_matches_the_sync_one():
 def test_solver_failure_truncates_and_keeps_the_last_good_state(env, monkeypatch):
     obs, _ = env.reset(seed=2)
     batch = env.unwrapped._batch
-    real_step = batch.sim.step
+    real_step = batch.sim._step_adaptive
 
-    def failing(state, kbar):
-        result = real_step(state, kbar)
+    def failing(state, kbar, dt, halvings):  # the adaptive path, halvings spent, leaves the state not finite
+        result = real_step(state, kbar, dt, halvings)
         return replace(result, converged=np.zeros_like(result.converged),
                        state=replace(result.state, q=np.full_like(result.state.q, np.nan)))
 
-    monkeypatch.setattr(batch.sim, "step", failing)
+    # every step goes to the adaptive path, as one that the compiled steps could not settle does
+    monkeypatch.setattr(simulator_module, "take_steps", lambda first, *arguments: first)
+    monkeypatch.setattr(batch.sim, "_step_adaptive", failing)
     after, reward, terminated, truncated, info = env.step(np.zeros(3))
     assert truncated and not terminated and info["solver_failure"]
     np.testing.assert_array_equal(after, obs)

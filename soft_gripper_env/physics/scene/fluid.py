@@ -114,15 +114,20 @@ class CurrentBatch:
         if velocity is None:
             if len(self._remembered) >= 2:
                 del self._remembered[next(iter(self._remembered))]  # the oldest
-            clock = time - self.start_time
-            angle = 2 * math.pi * clock / self.period + self.phase
-            velocity = self.velocity + self.oscillation * np.sin(angle)[:, None]
-            through = (clock - self.gust_start) / self.gust_duration  # 0 … 1 while the gust blows
-            blowing = (through >= 0.0) & (through <= 1.0) & self.gust_velocity.any(axis=1)
-            if blowing.any():
-                pulse = np.where(blowing, np.sin(math.pi * through) ** 2, 0.0)
-                velocity = velocity + self.gust_velocity * pulse[:, None]
-            self._remembered[time] = velocity
+            velocity = self._remembered[time] = self.at_times(np.array([time]))[0]
+        return velocity
+
+    def at_times(self, times: np.ndarray) -> np.ndarray:
+        """The water's velocity at every gripper at each of ``times`` (K,) [s], (K, B, 3) [m/s]; the one formula
+        of :meth:`at`."""
+        clock = np.asarray(times, dtype=float)[:, None] - self.start_time  # (K, B)
+        angle = 2 * math.pi * clock / self.period + self.phase
+        velocity = self.velocity + self.oscillation * np.sin(angle)[..., None]
+        through = (clock - self.gust_start) / self.gust_duration  # 0 … 1 while the gust blows
+        blowing = (through >= 0.0) & (through <= 1.0) & self.gust_velocity.any(axis=1)
+        if blowing.any():
+            pulse = np.where(blowing, np.sin(math.pi * through) ** 2, 0.0)
+            velocity = velocity + self.gust_velocity * pulse[..., None]
         return velocity
 
     def mean_acceleration(self, time: float, dt: float) -> np.ndarray:

@@ -92,6 +92,27 @@ class ContactReport:
         return total if self.palm_reaction is None else total + self.palm_reaction
 
 
+@dataclass(frozen=True, eq=False)
+class Advance:
+    """What :meth:`~..simulator.Simulator.advance` returns: several steps with a natural-curvature ramp, per
+    gripper (B) and finger (F)."""
+
+    state: RodState
+    """The state after the steps (a failed gripper's after its last good step; the batch's clock after all)."""
+    natural_curvature: np.ndarray
+    """κ̄ after the ramp (dimensionless), (B, F)."""
+    clock: np.ndarray
+    """Each gripper's clock advanced by the steps it took [s], (B,)."""
+    failed: np.ndarray
+    """Grippers whose step failed (Newton or a non-finite state, after halving); they took no further step, (B,)."""
+    newton_iterations: np.ndarray
+    """Newton iterations of the slowest finger, summed over the steps taken, (B,)."""
+    normal_impulse: np.ndarray
+    """Σ max(R_n, 0)·Δt of every node over the steps taken [N·s], (B, F, N)."""
+    impulse: np.ndarray
+    """Σ R·Δt of the object's force on every node, world frame [N·s], (B, F, N, 3)."""
+
+
 Record = TypeVar("Record")
 
 
@@ -112,6 +133,15 @@ def record(kind: type[Record], **fields) -> Record:
     return made
 
 
+def finite(state: RodState) -> np.ndarray:
+    """Per gripper, whether every coordinate and velocity and a free body's position and velocity are finite,
+    (B,)."""
+    ok = np.isfinite(state.q).all(axis=(1, 2, 3)) & np.isfinite(state.velocity).all(axis=(1, 2, 3))
+    if state.body_position is not None:
+        ok &= np.isfinite(state.body_position).all(axis=1) & np.isfinite(state.body_velocity).all(axis=1)
+    return ok
+
+
 def take_grippers(record, index: np.ndarray):
     """The grippers ``index`` of a state or contact report (every array field has the batch axis first)."""
     return evolve(record, **{name: value[index] for name, value in vars(record).items()
@@ -130,4 +160,5 @@ def _set(array: np.ndarray, index: np.ndarray, values: np.ndarray) -> np.ndarray
     return out
 
 
-__all__ = ["RodState", "StepResult", "ContactReport", "evolve", "record", "take_grippers", "put_grippers"]
+__all__ = ["RodState", "StepResult", "ContactReport", "Advance", "evolve", "record", "finite", "take_grippers",
+           "put_grippers"]

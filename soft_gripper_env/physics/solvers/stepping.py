@@ -1,0 +1,220 @@
+"""Many backward-Euler steps with contact in one compiled call: the hot path of a control interval.
+
+A control interval of the task is several physics steps with one natural-curvature rate per finger. Stepping them
+one call at a time from Python cost more than the physics itself (building the step's records, the holds, the
+water, the reports). :func:`take_steps` runs the same steps as the simulator's one-step path, in the same order
+and with the same arithmetic: the predictor, the corrector around Newton's method
+(:func:`~.corrector.solve_with_contact`), the end of the step, the 3-D frames carried along, the contact
+reactions. Per gripper it sums what a control interval reads (Newton iterations, the impulses of the contact
+reactions) and ramps κ̄ at its rate (:func:`commit_step`).
+
+It stops before a step that any running gripper does not settle (Newton failed, the corrector spent its budget, a
+coordinate is not finite) and says which: the simulator then takes that step on its adaptive path, which halves
+it, and commits the outcome through the same :func:`commit_step`, then calls :func:`take_steps` again for the rest.
+So a gripper's trajectory does not depend on which path stepped it.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ..kernels.contact import contact_reactions
+from ..kernels.forces import project_water
+from ..kernels.rod_3d import rod3d_update_frames
+from .corrector import solve_with_contact
+from .newton import finish, predict
+
+
+class WorkingState(NamedTuple):
+    """The batch's state as a run of steps updates it in place, per rod R = B·F (the simulator's
+    :class:`~.records.RodState` flattened). Fields a scene does not have are empty arrays."""
+
+    q: np.ndarray
+    """Coordinates [m, rad], (R, N, S)."""
+    velocity: np.ndarray
+    """[m/s, rad/s], (R, N, S)."""
+    acceleration: np.ndarray
+    """The last step's mean acceleration [m/s², rad/s²], (R, N, S) (zero before the first: the predictor alone)."""
+    held: np.ndarray
+    """Nodes held on the object, (R, N) bool."""
+    hold_offset: np.ndarray
+    """A free body's held nodes' offsets in its frame [m], (R, N, 3); (0, 0, 3) for a fixed object."""
+    tangent: np.ndarray
+    """3-D edge tangents, (R, N − 1, 3); (0, 0, 3) in the planar model."""
+    director: np.ndarray
+    """3-D first directors, (R, N − 1, 3); (0, 0, 3) in the planar model."""
+    reference_twist: np.ndarray
+    """3-D reference twist [rad], (R, N); (0, 0) in the planar model."""
+    body_position: np.ndarray
+    """A free body's centre [m], (B, 3); (0, 3) for a fixed object."""
+    body_velocity: np.ndarray
+    """[m/s], (B, 3)."""
+    body_orientation: np.ndarray
+    """Body to world, (B, 3, 3)."""
+    body_angular_velocity: np.ndarray
+    """[rad/s], (B, 3)."""
+
+
+class Interval(NamedTuple):
+    """What a run of steps ramps and sums per gripper, in place."""
+
+    natural_curvature: np.ndarray
+    """κ̄ of every rod (dimensionless), (R,): held through a step, then ramped by its rate."""
+    curvature_rate: np.ndarray
+    """dκ̄/dt of every rod [1/s], (R,)."""
+    curvature_low: float
+    """The least κ̄ the ramp reaches (dimensionless)."""
+    curvature_high: float
+    """The largest."""
+    running: np.ndarray
+    """Grippers still stepping, (B,) bool: a gripper whose step fails stops (its state stays that of its last good
+    step) and is marked ``failed``."""
+    failed: np.ndarray
+    """Grippers whose step failed in this run, (B,) bool."""
+    clock: np.ndarray
+    """Each gripper's own clock [s], (B,): advanced by Δt for every step it takes."""
+    newton_iterations: np.ndarray
+    """Newton iterations of the slowest finger, summed over the steps taken, (B,) int."""
+    normal_impulse: np.ndarray
+    """Σ max(R_n, 0)·Δt of every node over the steps taken [N·s], (R, N)."""
+    impulse: np.ndarray
+    """Σ R·Δt of every node, world frame [N·s], (R, N, 3)."""
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def commit_step(dt, ok, new, iterations, normal_reaction, reaction, state, interval):
+    """Takes a step of length ``dt`` [s] into the running grippers that it left ``ok`` (B,) bool: copies their part
+    of ``new`` (:class:`WorkingState`) into ``state``, adds their Newton ``iterations`` (B,) and the impulses of
+    their ``normal_reaction`` (R, N) and ``reaction`` (R, N, 3) [N] into ``interval`` (:class:`Interval`), ramps
+    their κ̄ and advances their clocks. A running gripper that the step did not leave ok stops and fails."""
+    n_rods = state.q.shape[0]
+    n_fingers = n_rods // ok.shape[0]
+    for b in range(ok.shape[0]):
+        if not interval.running[b]:
+            continue
+        if not ok[b]:
+            interval.running[b] = False
+            interval.failed[b] = True
+            continue
+        for r in range(b * n_fingers, (b + 1) * n_fingers):
+            state.q[r] = new.q[r]
+            state.velocity[r] = new.velocity[r]
+            state.acceleration[r] = new.acceleration[r]
+            state.held[r] = new.held[r]
+            if state.hold_offset.shape[0] > 0:
+                state.hold_offset[r] = new.hold_offset[r]
+            if state.tangent.shape[0] > 0:
+                state.tangent[r] = new.tangent[r]
+                state.director[r] = new.director[r]
+                state.reference_twist[r] = new.reference_twist[r]
+            for i in range(normal_reaction.shape[1]):
+                interval.normal_impulse[r, i] += max(normal_reaction[r, i], 0.0) * dt
+                for d in range(3):
+                    interval.impulse[r, i, d] += reaction[r, i, d] * dt
+            ramped = interval.natural_curvature[r] + interval.curvature_rate[r] * dt
+            interval.natural_curvature[r] = min(max(ramped, interval.curvature_low), interval.curvature_high)
+        if state.body_position.shape[0] > 0:
+            state.body_position[b] = new.body_position[b]
+            state.body_velocity[b] = new.body_velocity[b]
+            state.body_orientation[b] = new.body_orientation[b]
+            state.body_angular_velocity[b] = new.body_angular_velocity[b]
+        interval.newton_iterations[b] += iterations[b]
+        interval.clock[b] += dt
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body, interval):
+    """Steps ``first`` … ``n_steps`` − 1 of length ``dt`` [s] of every running gripper, from and into ``state``
+    (:class:`WorkingState`), with the current at every gripper at each step's start and end, ``gripper_water``
+    (n_steps + 1, B, 3) [m/s]; ramps and sums into ``interval`` (:class:`Interval`). ``rods`` (with ``state``'s
+    frames in 3-D), ``terms``, ``solver`` and ``geometry`` are the plain fields that
+    :func:`~.corrector.solve_with_contact` takes, ``projection`` (R, D, 3) rod coordinates from world vectors;
+    ``body`` the free bodies' arrays, or None for a fixed object.
+    Returns the index of the first step it did not take (``n_steps`` when it took them all): one that a running
+    gripper did not settle, which the caller takes on the adaptive path."""
+    n_rods, n_nodes, stride = state.q.shape
+    n_fingers = solver[5]
+    n_grippers = n_rods // n_fingers
+    dim = geometry[0].shape[1]
+    planar = state.tangent.shape[0] == 0
+    free_body = body is not None
+    q_pred = np.empty_like(state.q)
+    new = WorkingState(np.empty_like(state.q), np.empty_like(state.q), np.empty_like(state.q),
+                       np.empty_like(state.held), np.empty_like(state.hold_offset), np.empty_like(state.tangent),
+                       np.empty_like(state.director), np.empty_like(state.reference_twist),
+                       np.empty_like(state.body_position), np.empty_like(state.body_velocity),
+                       np.empty_like(state.body_orientation), np.empty_like(state.body_angular_velocity))
+    water = np.empty((n_rods, dim))
+    water_acceleration = np.empty((n_grippers, 3))
+    near = np.empty((n_rods, n_nodes, n_fingers) if rods[5][0] > 0.0 else (0, 0, 0), dtype=np.int64)
+    sliding = np.empty((n_rods, n_nodes), dtype=np.bool_)
+    friction = np.empty((n_rods, n_nodes, dim))
+    measured = np.empty((n_rods, n_nodes * stride), dtype=np.bool_)
+    hold_at = np.empty((n_rods, n_nodes, dim))
+    converged, changed = np.empty(n_rods, dtype=np.bool_), np.empty(n_rods, dtype=np.bool_)
+    iterations, corrector = np.empty(n_rods, dtype=np.int64), np.empty(n_rods, dtype=np.int64)
+    ratio, residual = np.empty(n_rods), np.empty((n_rods, n_nodes * stride))
+    reaction, normal_reaction = np.empty((n_rods, n_nodes, 3)), np.empty((n_rods, n_nodes))
+    ok = np.empty(n_grippers, dtype=np.bool_)
+    most = np.zeros(n_grippers, dtype=np.int64)
+    for k in range(first, n_steps):
+        project_water(geometry[5], gripper_water[k], water)
+        predict(state.q, state.velocity, state.acceleration, dt, q_pred, new.q)
+        new.held[:, :] = state.held
+        sliding[:, :] = False
+        friction[:, :, :] = 0.0
+        hold_at[:, :, :] = state.q[:, :, :dim]
+        changed[:] = False
+        corrector[:] = 0
+        step = (state.q, q_pred, interval.natural_curvature, water, dt, near)
+        result = (converged, iterations, ratio, residual, corrector, changed)
+        if free_body:
+            new.hold_offset[:, :, :] = state.hold_offset
+            for b in range(n_grippers):
+                for d in range(3):
+                    new.body_position[b, d] = state.body_position[b, d] + dt * state.body_velocity[b, d]
+                    new.body_angular_velocity[b, d] = dt * state.body_angular_velocity[b, d]  # θ, the rotation
+                    water_acceleration[b, d] = (gripper_water[k + 1, b, d] - gripper_water[k, b, d]) / dt
+            old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
+            motion = (new.body_position, new.body_angular_velocity, new.body_orientation, old, gripper_water[k],
+                      water_acceleration)
+            holds = (new.held, new.hold_offset, projection, sliding, friction, measured, geometry[0], geometry[1],
+                     geometry[2], geometry[3])
+            solve_with_contact(new.q, step, rods, terms, solver, holds, hold_at, geometry,
+                               (body, motion), result)
+        else:
+            holds = (new.held, state.hold_offset, projection, sliding, friction, measured, geometry[0], geometry[1],
+                     geometry[2], geometry[3])
+            solve_with_contact(new.q, step, rods, terms, solver, holds, hold_at, geometry,
+                               None, result)
+        finish(new.q, state.q, state.velocity, dt, new.velocity, new.acceleration)
+        if free_body:
+            for b in range(n_grippers):
+                for d in range(3):
+                    new.body_velocity[b, d] = (new.body_position[b, d] - state.body_position[b, d]) / dt
+                    new.body_angular_velocity[b, d] = new.body_angular_velocity[b, d] / dt
+        if not planar:
+            rod3d_update_frames(new.q, state.tangent, state.director, state.reference_twist, new.tangent,
+                                new.director, new.reference_twist)
+        for b in range(n_grippers):
+            settled = True
+            most[b] = 0
+            for r in range(b * n_fingers, (b + 1) * n_fingers):
+                settled = settled and converged[r] and not changed[r]
+                most[b] = max(most[b], iterations[r])
+            ok[b] = settled and np.isfinite(new.q[b * n_fingers:(b + 1) * n_fingers]).all() \
+                and np.isfinite(new.velocity[b * n_fingers:(b + 1) * n_fingers]).all()
+            if free_body:
+                ok[b] = ok[b] and np.isfinite(new.body_position[b]).all() and np.isfinite(new.body_velocity[b]).all()
+            if interval.running[b] and not ok[b]:
+                return k
+        contact_reactions(new.q, residual, new.held, friction, geometry[0], geometry[1], geometry[5], reaction,
+                          normal_reaction)
+        commit_step(dt, ok, new, most, normal_reaction, reaction, state, interval)
+    return n_steps
+
+
+__all__ = ["WorkingState", "Interval", "commit_step", "take_steps"]

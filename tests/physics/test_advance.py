@@ -1,0 +1,146 @@
+"""Simulator.advance: many steps in one compiled call give, to the bit, what as many calls of Simulator.step give,
+including the steps it hands to the adaptive (halving) path and the grippers that fail or do not run."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from soft_gripper_env.grasp_task import GraspTask, task_episode
+from soft_gripper_env.physics import NATURAL_CURVATURE_LIMIT, NewtonSettings, Simulator, paper_scene
+from soft_gripper_env.physics.scene.objects import PAPER_BALL
+
+STATE_FIELDS = ("q", "velocity", "acceleration", "tangent", "director", "reference_twist", "held", "hold_offset",
+                "body_position", "body_velocity", "body_orientation", "body_angular_velocity")
+
+
+def task_scenes(model, batch_size, seed=3):
+    """The grasp task's scenes (free spheres in a current with a gust, fingers of finite thickness touching each
+    other, friction passes capped), one per gripper."""
+    task = GraspTask(model=model)
+    rng = np.random.default_rng(seed)
+    return [task_episode(task, rng, {}).scene for _ in range(batch_size)]
+
+
+def stepped(sim, state, natural_curvature, rate, n_steps, low, high, running, clock):
+    """What ``advance`` does, computed with ``Simulator.step`` one step at a time and numpy."""
+    B, F = natural_curvature.shape
+    natural_curvature, clock, running = natural_curvature.copy(), clock.copy(), running.copy()
+    failed, iterations = np.zeros(B, dtype=bool), np.zeros(B, dtype=np.int64)
+    normal_impulse = np.zeros((B, F, sim.disc.n_nodes))
+    impulse = np.zeros((B, F, sim.disc.n_nodes, 3))
+    dt = sim.scene.time_step
+    substeps = 0
+    for _ in range(n_steps):
+        if not running.any():
+            break
+        result = sim.step(state, natural_curvature)
+        substeps = max(substeps, int(result.substeps.max()))
+        ok = result.converged & np.isfinite(result.state.q).all(axis=(1, 2, 3)) \
+            & np.isfinite(result.state.velocity).all(axis=(1, 2, 3))
+        keep = running & ok
+        failed |= running & ~ok
+        merged = {}
+        for name in STATE_FIELDS:
+            old, new = getattr(state, name), getattr(result.state, name)
+            if new is None:
+                continue
+            if old is None:
+                old = np.zeros_like(new)
+            merged[name] = np.where(keep.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)
+        state = replace(result.state, **merged)
+        if result.contact is not None:
+            normal_impulse[keep] += np.maximum(result.contact.normal_reaction[keep], 0.0) * dt
+            impulse[keep] += result.contact.reaction[keep] * dt
+        natural_curvature[keep] = np.clip(natural_curvature[keep] + rate[keep] * dt, low, high)
+        iterations[keep] += result.newton_iterations[keep]
+        clock[keep] += dt
+        running = keep
+    return state, natural_curvature, clock, failed, iterations, normal_impulse, impulse, substeps
+
+
+def assert_same(sim, state, n_steps, rate, low=-1.5, high=0.2, running=None, clock=None, natural_curvature=None):
+    """Checks ``advance`` against :func:`stepped`, bitwise; returns the most substeps a step took."""
+    B, F = sim.batch_size, sim.n_fingers
+    natural_curvature = np.zeros((B, F)) if natural_curvature is None else natural_curvature
+    running = np.ones(B, dtype=bool) if running is None else running
+    clock = np.zeros(B) if clock is None else clock
+    advanced = sim.advance(state, natural_curvature, rate, n_steps, (low, high), running=running, clock=clock)
+    expected_state, expected_curvature, expected_clock, failed, iterations, normal_impulse, impulse, substeps = \
+        stepped(sim, state, natural_curvature, rate, n_steps, low, high, running, clock)
+    for name in STATE_FIELDS:
+        expected = getattr(expected_state, name)
+        if expected is not None:
+            np.testing.assert_array_equal(getattr(advanced.state, name), expected, err_msg=name)
+    assert advanced.state.time == expected_state.time
+    np.testing.assert_array_equal(advanced.natural_curvature, expected_curvature)
+    np.testing.assert_array_equal(advanced.clock, expected_clock)
+    np.testing.assert_array_equal(advanced.failed, failed)
+    np.testing.assert_array_equal(advanced.newton_iterations, iterations)
+    np.testing.assert_array_equal(advanced.normal_impulse, normal_impulse)
+    np.testing.assert_array_equal(advanced.impulse, impulse)
+    return advanced, substeps
+
+
+@pytest.mark.parametrize("model", ["planar", "3d"])
+def test_advance_is_bitwise_the_steps_of_a_grasp(model):
+    """Four task grippers bent toward their spheres close at different rates through 60 steps (contact,
+    friction, the current); a fifth does not run and keeps its state."""
+    scenes = task_scenes(model, 5)
+    sim = Simulator(scenes)
+    state = sim.initial_state()
+    rate = np.linspace(-0.5, -0.1, 15).reshape(5, 3)
+    running = np.array([True, True, False, True, True])
+    clock = np.linspace(0.0, 0.4, 5)
+    advanced, _ = assert_same(sim, state, 60, rate, running=running, clock=clock,
+                              natural_curvature=np.full((5, 3), -0.3))
+    assert advanced.normal_impulse[running].sum() > 0  # the fingers reached the spheres
+    for name in ("q", "body_position"):
+        np.testing.assert_array_equal(getattr(advanced.state, name)[2], getattr(state, name)[2])
+    assert advanced.clock[2] == clock[2]
+    # and on from there, with the ramp pinned at its end
+    assert_same(sim, advanced.state, 20, rate, high=-0.05, natural_curvature=advanced.natural_curvature,
+                clock=advanced.clock)
+
+
+def test_advance_hands_steps_that_need_halving_to_the_adaptive_path():
+    """Two Newton iterations per solve are too few for the impacts: steps are halved on the adaptive path, and
+    advance still gives what the steps give."""
+    scenes = [replace(scene, newton=NewtonSettings(max_iterations=2)) for scene in task_scenes("planar", 3)]
+    sim = Simulator(scenes)
+    _, substeps = assert_same(sim, sim.initial_state(), 25, np.full((3, 3), -1.0))
+    assert substeps > 1
+
+
+def test_a_gripper_that_fails_stops_and_the_others_run_on():
+    """Without halvings and with four Newton iterations, two grippers bending fast fail part-way (at different
+    steps), and a still one runs on; the advance stops each where the steps do."""
+    scenes = [replace(scene, newton=NewtonSettings(max_iterations=4, max_step_halvings=0))
+              for scene in task_scenes("planar", 3)]
+    sim = Simulator(scenes)
+    rate = np.array([[0.0] * 3, [-2.0] * 3, [-0.5] * 3])
+    advanced, _ = assert_same(sim, sim.initial_state(), 80, rate,
+                              natural_curvature=np.array([[0.0] * 3, [-0.05] * 3, [-0.05] * 3]))
+    np.testing.assert_array_equal(advanced.failed, [False, True, True])
+    assert advanced.clock[0] > advanced.clock[2] > advanced.clock[1] > 0.0
+
+
+@pytest.mark.parametrize("grasped_object", [PAPER_BALL, None], ids=["fixed ball", "no object"])
+def test_advance_with_a_fixed_object_or_none(grasped_object):
+    sim = Simulator(paper_scene("planar", grasped_object=grasped_object), 2)
+    assert_same(sim, sim.initial_state(), 40, np.array([[-0.15] * 3, [-0.3] * 3]), low=-NATURAL_CURVATURE_LIMIT)
+
+
+def test_advance_refuses_bad_input():
+    sim = Simulator(paper_scene("planar", grasped_object=PAPER_BALL))
+    state = sim.initial_state()
+    with pytest.raises(ValueError, match="n_steps = 0"):
+        sim.advance(state, 0.0, 0.0, 0)
+    with pytest.raises(ValueError, match=r"curvature_range = \(0.5, -0.5\)"):
+        sim.advance(state, 0.0, 0.0, 1, (0.5, -0.5))
+    with pytest.raises(ValueError, match="curvature_range"):
+        sim.advance(state, 0.0, 0.0, 1, (-3.0, 0.0))
+    with pytest.raises(ValueError, match="curvature_rate"):
+        sim.advance(state, 0.0, np.nan, 1)
+    with pytest.raises(ValueError, match="natural_curvature"):
+        sim.advance(state, 5.0, 0.0, 1)
