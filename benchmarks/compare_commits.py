@@ -49,12 +49,26 @@ def run_benchmark(tree: Path, name: str, repeats: int, workdir: Path) -> dict[st
     done = subprocess.run(command, cwd=tree, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{name} failed in {tree}:\n{done.stderr[-3000:]}")
+    return measurements(json.loads(out.read_text()))
+
+
+UNITS = ("_per_s", "_s", "_ms")
+"""How a measurement's name ends (a rate or a time); a name holding ``_us`` is a time in µs too."""
+
+
+def measurements(results: dict, prefix: str = "", unit: bool = False) -> dict[str, float]:
+    """A benchmark's results flattened to {measurement: value}, nested entries as ``outer[inner]``: every number
+    whose own name carries a unit (:data:`UNITS`), or that is one size of a measurement with a unit
+    (``batched_planar_us_per_gripper_step[64]``). Ratios, goals and flags are left out: they follow from the
+    measurements."""
     flat = {}
-    for key, value in json.loads(out.read_text()).items():
+    for key, value in results.items():
+        name = f"{prefix}[{key}]" if prefix else key
+        measured = key.endswith(UNITS) or "_us" in key or (unit and key.isdigit())
         if isinstance(value, dict):
-            flat.update({f"{key}[{k}]": v for k, v in value.items()})
-        else:
-            flat[key] = value
+            flat.update(measurements(value, name, measured))
+        elif isinstance(value, (int, float)) and not isinstance(value, bool) and measured:
+            flat[name] = float(value)
     return flat
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.compare_commits import higher_is_faster
+from benchmarks.compare_commits import higher_is_faster, measurements
 from benchmarks.speed_vs_error import (
     OUTCOME_DEFAULT,
     OUTCOME_REFERENCE,
@@ -46,6 +46,19 @@ def test_compare_commits_reads_rates_and_times_the_right_way_round():
     assert higher_is_faster("vector_64_env_steps_per_s")
     assert not higher_is_faster("seed_scene_planar_s")
     assert not higher_is_faster("batched_planar_us_per_gripper_step[64]")
+
+
+def test_compare_commits_keeps_measurements_and_leaves_out_ratios_and_goals():
+    """env_speed's JSON nests two levels deep; the comparison takes the timed numbers only."""
+    results = {"ant_v5_steps_per_s": 3000.0, "vector_sizes": [1, 64],
+               "ratios_to_ant_v5": {"single_vs_ant_v5": 0.2}, "two_threads_over_one": {"planar": 1.7},
+               "core": {"paper_scene_planar_ms": 5.0, "batched_planar_us_per_gripper_step": 29.0},
+               "batched_planar_us_per_gripper_step": {"1": 40.0, "64": 29.0},
+               "goals": {"single_steps_per_s": {"goal_vs_ant_v5": 2.0, "reached_vs_ant_v5": 0.2, "met": False}}}
+    assert measurements(results) == {
+        "ant_v5_steps_per_s": 3000.0, "core[paper_scene_planar_ms]": 5.0,
+        "core[batched_planar_us_per_gripper_step]": 29.0, "batched_planar_us_per_gripper_step[1]": 40.0,
+        "batched_planar_us_per_gripper_step[64]": 29.0}
 
 
 def test_compare_commits_refuses_an_unknown_base():
