@@ -77,16 +77,22 @@ def _add_edge_block(band_r, stride, i, dim, block, scale):
             band_r[row_j, kd - row_j + col_i] += value
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _edge_tangent(positions, e, t):
-    """Writes the unit tangent of edge e of one rod (positions (N, D)) into ``t`` (D,)."""
-    length2 = 0.0
-    for k in range(t.size):
-        t[k] = positions[e + 1, k] - positions[e, k]
-        length2 += t[k] * t[k]
-    inverse_length = 1.0 / math.sqrt(length2)
-    for k in range(t.size):
-        t[k] *= inverse_length
+# An edge's vectors are 3-tuples, zero-padded in the planar model: values that Numba keeps in registers. The padding
+# adds exact zeros, so the arithmetic on the plane's two components is what a loop over them did, to the bit.
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _padded(array, i, dim):
+    """Row i of an (N, D) array as a 3-tuple; its third component 0 in the planar model (D = 2)."""
+    return (array[i, 0], array[i, 1], array[i, 2] if dim == 3 else 0.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _unit_tangent(start, end):
+    """The unit vector from ``start`` to ``end`` (3-tuples)."""
+    d = (end[0] - start[0], end[1] - start[1], end[2] - start[2])
+    inverse_length = 1.0 / math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    return (d[0] * inverse_length, d[1] * inverse_length, d[2] * inverse_length)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -97,21 +103,17 @@ def morison_drag(positions, velocities, current, normal, tangential, velocity_de
     ``normal``, ``tangential``: ½·ρ_w·C·D·l̄ per edge [kg/m] (the tangential one with π·D); ``current`` (D,).
     """
     n_nodes, dim = positions.shape
-    t = np.empty(dim)
-    w = np.empty(dim)
-    wn = np.empty(dim)
     block = np.empty((dim, dim))
+    u = (current[0], current[1], current[2] if dim == 3 else 0.0)
+    start, v_start = _padded(positions, 0, dim), _padded(velocities, 0, dim)
     for e in range(n_nodes - 1):
-        _edge_tangent(positions, e, t)
-        s = 0.0
-        for k in range(dim):
-            w[k] = 0.5 * (velocities[e, k] + velocities[e + 1, k]) - current[k]
-            s += w[k] * t[k]
-        speed_n2 = 0.0
-        for k in range(dim):
-            wn[k] = w[k] - s * t[k]
-            speed_n2 += wn[k] * wn[k]
-        speed_n = math.sqrt(speed_n2)
+        end, v_end = _padded(positions, e + 1, dim), _padded(velocities, e + 1, dim)
+        t = _unit_tangent(start, end)
+        w = (0.5 * (v_start[0] + v_end[0]) - u[0], 0.5 * (v_start[1] + v_end[1]) - u[1],
+             0.5 * (v_start[2] + v_end[2]) - u[2])
+        s = w[0] * t[0] + w[1] * t[1] + w[2] * t[2]
+        wn = (w[0] - s * t[0], w[1] - s * t[1], w[2] - s * t[2])
+        speed_n = math.sqrt(wn[0] * wn[0] + wn[1] * wn[1] + wn[2] * wn[2])
         cn = normal[e]
         ct = tangential[e]
         for k in range(dim):
@@ -128,6 +130,7 @@ def morison_drag(positions, velocities, current, normal, tangential, velocity_de
                 block[a, b] = value
         # w = (v_e + v_{e+1})/2 and each node takes half the force: a factor ¼ on every node pair
         _add_edge_block(band, stride, e, dim, block, 0.25 * velocity_derivative)
+        start, v_start = end, v_end
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -135,11 +138,12 @@ def added_mass(start_positions, accelerations, edge_mass, acceleration_derivativ
     """Added-mass force −Σ ½·m_a·(I − t tᵀ)·a_node of every edge of one rod, with tangents at the start of the
     step; adds the force to ``force`` (N, D) and ½·m_a·(I − t tᵀ)·∂a/∂q on the node blocks of ``band``."""
     n_nodes, dim = start_positions.shape
-    t = np.empty(dim)
     block = np.empty((dim, dim))
     kd = band.shape[1] - 1
+    start = _padded(start_positions, 0, dim)
     for e in range(n_nodes - 1):
-        _edge_tangent(start_positions, e, t)
+        end = _padded(start_positions, e + 1, dim)
+        t = _unit_tangent(start, end)
         half = 0.5 * edge_mass[e]
         for a in range(dim):
             for b in range(dim):
@@ -153,6 +157,7 @@ def added_mass(start_positions, accelerations, edge_mass, acceleration_derivativ
                 row = stride * node + a
                 for b in range(a + 1):
                     band[row, kd - a + b] += acceleration_derivative * block[a, b]
+        start = end
 
 
 __all__ = ["rod_water_velocity", "project_water", "linear_damping", "morison_drag", "added_mass"]
