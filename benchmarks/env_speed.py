@@ -10,7 +10,12 @@ only ever slows a run down):
 - ``SoftGripperUnderwater-v0`` from ``gym.make`` (one env) for two episodes' length of actions (``--steps`` twice,
   resetting when an episode ends), and from ``gym.make_vec`` with 1, 16, 64 and 256 envs for one episode's length
   each (``--steps`` = 60 actions; autoreset), in the planar and the 3-D model;
-- ``make_vec`` with 64 envs on two threads (``num_threads=2``), in both models.
+- ``make_vec`` with 64 envs on two threads (``num_threads=2``), in both models;
+- grasping: one env and ``make_vec(64)`` driven by the reactive controller (``agents.scripted.ReactivePolicy``),
+  which closes on the specimen and holds it through most of the episode, as a trained policy does. Random actions
+  rarely touch it, and a held specimen costs several times more per step (more corrector passes and Newton
+  iterations, each coupling fingers and body), so these figures are the ones training sees. One timed run each after
+  a warm-up (they are the slowest figures of the run).
 
 Every figure is in env steps per second on one core (Numba and BLAS are held to one thread each, and a vector's
 ``num_threads`` adds its own), with its ratio to ``Ant-v5``'s figure of the same run. The physics core's goals
@@ -84,6 +89,21 @@ def time_vector(model: str, num_envs: int, steps: int, num_threads: int = 1) -> 
                                          num_threads=num_threads), steps)
 
 
+def time_grasping(model: str, num_envs: int, steps: int) -> float:
+    """Env steps per second while the reactive controller grasps: one env (``num_envs`` = 0) over ``steps``
+    actions, resetting when an episode ends, or ``make_vec(num_envs)`` (autoreset)."""
+    import gymnasium as gym
+
+    import soft_gripper_env
+    from agents.scripted import ReactivePolicy
+    from soft_gripper_env.grasp_task import GraspTask
+
+    policy = ReactivePolicy(GraspTask(model=model))
+    env = gym.make(soft_gripper_env.ENV_ID, model=model) if num_envs == 0 else \
+        gym.make_vec(soft_gripper_env.ENV_ID, num_envs=num_envs, model=model)
+    return steps_per_second(env, steps, policy)
+
+
 def best(function, repeats: int, *args) -> float:
     """The largest of ``repeats`` results of ``function(*args)``, after one untimed call (compilation, caches)."""
     function(*args)
@@ -113,6 +133,9 @@ def measure(repeats: int, sizes: tuple[int, ...], steps: int) -> dict:
             results[f"vec{n}{suffix}_steps_per_s"] = best(time_vector, repeats, model, n, steps)
         print(f"timing {model}: make_vec(64) on two threads ...", flush=True)
         results[f"vec64{suffix}_two_threads_steps_per_s"] = best(time_vector, repeats, model, 64, steps, 2)
+        print(f"timing {model}: grasping, one env and make_vec(64) ...", flush=True)
+        results[f"single{suffix}_grasping_steps_per_s"] = best(time_grasping, 1, model, 0, 2 * steps)
+        results[f"vec64{suffix}_grasping_steps_per_s"] = best(time_grasping, 1, model, 64, steps)
     print("timing the physics core ...", flush=True)
     core = time_core(repeats)
     # the anchor again, at the end: a machine that slowed down during the run shows as two different figures
@@ -165,6 +188,11 @@ def plot(results: dict, sizes: tuple[int, ...], path: Path) -> None:
         ax.scatter([64], [results[f"vec64{suffix}_two_threads_steps_per_s"] / ant], marker="^", s=70, color=color,
                    label=f"make_vec(64), {model}, two threads", zorder=3)
         ax.axhline(results[f"single{suffix}_steps_per_s"] / ant, color=color, ls=":", label=f"gym.make, {model}")
+        if f"vec64{suffix}_grasping_steps_per_s" in results:
+            ax.scatter([1, 64], [results[f"single{suffix}_grasping_steps_per_s"] / ant,
+                                 results[f"vec64{suffix}_grasping_steps_per_s"] / ant], marker="x", s=70,
+                       color=color, label=f"grasping (reactive controller): gym.make at 1, make_vec(64), {model}",
+                       zorder=3)
     ax.axhline(1.0, color="k", lw=1.5, label=f"Ant-v5 ({ant:,.0f} steps/s in this run)")
     for (key, goal), marker in zip(GOALS.items(), ("s", "D", "s", "D"), strict=True):
         color = "C1" if "3d" in key else "C0"

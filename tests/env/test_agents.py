@@ -229,7 +229,8 @@ def test_env_speed_benchmark_writes_json_and_plot(tmp_path):
     assert out.returncode == 0, out.stderr
     results = json.loads((tmp_path / "speed.json").read_text())
     required = {"ant_v5_steps_per_s", "single_steps_per_s", "vec64_steps_per_s", "single_3d_steps_per_s",
-                "vec64_3d_steps_per_s", "vec64_two_threads_steps_per_s"}
+                "vec64_3d_steps_per_s", "vec64_two_threads_steps_per_s", "single_grasping_steps_per_s",
+                "vec64_grasping_steps_per_s", "single_3d_grasping_steps_per_s", "vec64_3d_grasping_steps_per_s"}
     assert required <= set(results) and all(results[key] > 0 for key in required)
     ant = results["ant_v5_steps_per_s"]
     for key in required - {"ant_v5_steps_per_s"}:
