@@ -369,7 +369,8 @@ class Simulator:
         clock = np.zeros(B) if clock is None else np.array(np.broadcast_to(clock, (B,)), dtype=float)
         interval = Interval(self._natural_curvature(natural_curvature).copy(), rate, low, high, running,
                             np.zeros(B, dtype=bool), clock, np.zeros(B, dtype=np.int64),
-                            np.zeros((R, self.disc.n_nodes)), np.zeros((R, self.disc.n_nodes, 3)))
+                            np.zeros((R, self.disc.n_nodes)), np.zeros((R, self.disc.n_nodes, 3)),
+                            np.zeros(B, dtype=bool), self.scene.newton.max_step_halvings > 0)
         work = self._working_state(state, copy=True)
         dt = self.scene.time_step
         times = [state.time]
@@ -382,13 +383,18 @@ class Simulator:
                 self._plain_rods[:N_DESIGN_FIELDS] + (work.tangent, work.director, work.reference_twist)
             body = None if self._body is None else self._body.plain_arrays
         while k < n_steps and interval.running.any():
-            if self._has_object:
-                k = take_steps(k, n_steps, dt, water, work, rods, self._plain_terms, self._per_step(dt),
-                               self._plain_geometry, self._projection, body, interval)
-                if k == n_steps or not interval.running.any():
-                    break
-            self._adaptive_step(work, times[k], dt, interval)
-            k += 1
+            if not self._has_object:
+                self._adaptive_step(work, times[k], dt, interval)
+                k += 1
+                continue
+            k = take_steps(k, n_steps, dt, water, work, rods, self._plain_terms, self._per_step(dt),
+                           self._plain_geometry, self._projection, body, interval)
+            if interval.pending.any():  # the others took step k; it is halved for the grippers left pending
+                self._halve_pending(work, times[k], dt, interval)
+                k += 1
+            elif k < n_steps and interval.running.any():
+                raise RuntimeError(f"take_steps stopped at step {k} of {n_steps} with grippers running and none "
+                                   f"pending")
         N = self.disc.n_nodes
         return record(Advance, state=self._state_of(work, times[k]),
                       natural_curvature=interval.natural_curvature.reshape(B, F), clock=interval.clock,
@@ -401,12 +407,33 @@ class Simulator:
         ``interval`` as the compiled steps commit theirs."""
         result = self._step_adaptive(self._state_of(work, time), interval.natural_curvature, dt,
                                      self.scene.newton.max_step_halvings)
-        R, N = self.n_rods, self.disc.n_nodes
+        self._commit(self, np.arange(self.batch_size), result.converged & finite(result.state),
+                     result.newton_iterations, result, dt, work, interval)
+
+    def _halve_pending(self, work: WorkingState, time: float, dt: float, interval: Interval) -> None:
+        """The step at ``time`` [s] of :meth:`advance` for the grippers that the compiled steps left pending: two
+        half steps, each halved again as the adaptive path allows (:meth:`_halves`), committed into ``work`` and
+        ``interval``."""
+        grippers = np.nonzero(interval.pending)[0]
+        interval.pending[:] = False
+        natural_curvature = interval.natural_curvature.reshape(self.batch_size, -1)[grippers].ravel()
+        sub, first, second = self._halves(take_grippers(self._state_of(work, time), grippers), grippers,
+                                          natural_curvature, dt, self.scene.newton.max_step_halvings)
+        self._commit(sub, grippers, first.converged & second.converged & finite(second.state),
+                     first.newton_iterations + second.newton_iterations, second, dt, work, interval)
+
+    @staticmethod
+    def _commit(sim: Simulator, grippers: np.ndarray, ok: np.ndarray, iterations: np.ndarray, result: StepResult,
+                dt: float, work: WorkingState, interval: Interval) -> None:
+        """Commits ``result``, a step of ``sim``'s grippers (this batch's ``grippers``), through
+        :func:`~.solvers.stepping.commit_step`; its contact reactions are the step's last (a halved step's second
+        half's)."""
+        R, N = sim.n_rods, sim.disc.n_nodes
         contact = result.contact
         normal = np.zeros((R, N)) if contact is None else contact.normal_reaction.reshape(R, N)
         reaction = np.zeros((R, N, 3)) if contact is None else contact.reaction.reshape(R, N, 3)
-        commit_step(dt, result.converged & finite(result.state), self._working_state(result.state, copy=False),
-                    result.newton_iterations, normal, reaction, work, interval)
+        commit_step(dt, grippers, ok, sim._working_state(result.state, copy=False), iterations, normal, reaction,
+                    work, interval)
 
     def _working_state(self, state: RodState, copy: bool) -> WorkingState:
         """``state``'s arrays flattened per rod for the compiled steps (:class:`~.solvers.stepping.WorkingState`):
@@ -454,10 +481,8 @@ class Simulator:
         if halvings == 0 or settled.all():
             return result
         failed = np.nonzero(~settled)[0]  # a corrector that spent its budget is retried in halves too
-        sub = self._subsimulator(failed)
         sub_natural_curvature = natural_curvature.reshape(self.batch_size, -1)[failed].ravel()
-        first = sub._step_adaptive(take_grippers(state, failed), sub_natural_curvature, 0.5 * dt, halvings - 1)
-        second = sub._step_adaptive(first.state, sub_natural_curvature, 0.5 * dt, halvings - 1)
+        _, first, second = self._halves(take_grippers(state, failed), failed, sub_natural_curvature, dt, halvings)
         merged = evolve(put_grippers(result.state, failed, second.state), time=result.state.time)
         contact = result.contact
         if contact is not None:
@@ -469,6 +494,16 @@ class Simulator:
                                                  first.newton_iterations + second.newton_iterations),
                           residual=_set(result.residual, failed, np.maximum(first.residual, second.residual)),
                           contact=contact, substeps=_set(result.substeps, failed, first.substeps + second.substeps))
+
+    def _halves(self, state: RodState, grippers: np.ndarray, natural_curvature: np.ndarray, dt: float,
+                halvings: int) -> tuple[Simulator, StepResult, StepResult]:
+        """A step of ``dt`` [s] for this batch's ``grippers`` from ``state`` (theirs alone) with κ̄ per rod, taken
+        as two half steps, each of which may be halved again while ``halvings`` − 1 allows: the simulator of those
+        grippers and the two halves' results."""
+        sub = self._subsimulator(grippers)
+        first = sub._step_adaptive(state, natural_curvature, 0.5 * dt, halvings - 1)
+        second = sub._step_adaptive(first.state, natural_curvature, 0.5 * dt, halvings - 1)
+        return sub, first, second
 
     def _subsimulator(self, grippers: np.ndarray) -> Simulator:
         """A simulator of the scenes of ``grippers`` (indices), kept for reuse by their count."""

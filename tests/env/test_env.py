@@ -215,17 +215,20 @@ def test_gymnasium_async_vector_env_matches_the_sync_one():
 
 def test_solver_failure_truncates_and_keeps_the_last_good_state(env, monkeypatch):
     obs, _ = env.reset(seed=2)
-    batch = env.unwrapped._batch
-    real_step = batch.sim._step_adaptive
+    real_step = simulator_module.Simulator._step_adaptive
 
-    def failing(state, kbar, dt, halvings):  # the adaptive path, halvings spent, leaves the state not finite
-        result = real_step(state, kbar, dt, halvings)
+    def failing(self, state, kbar, dt, halvings):  # the adaptive path, halvings spent, leaves the state not finite
+        result = real_step(self, state, kbar, dt, halvings)
         return replace(result, converged=np.zeros_like(result.converged),
                        state=replace(result.state, q=np.full_like(result.state.q, np.nan)))
 
-    # every step goes to the adaptive path, as one that the compiled steps could not settle does
-    monkeypatch.setattr(simulator_module, "take_steps", lambda first, *arguments: first)
-    monkeypatch.setattr(batch.sim, "_step_adaptive", failing)
+    def unsettled(first, *arguments):  # every running gripper leaves the first step to the adaptive path
+        interval = arguments[-1]
+        interval.pending[:] = interval.running
+        return first
+
+    monkeypatch.setattr(simulator_module, "take_steps", unsettled)
+    monkeypatch.setattr(simulator_module.Simulator, "_step_adaptive", failing)
     after, reward, terminated, truncated, info = env.step(np.zeros(3))
     assert truncated and not terminated and info["solver_failure"]
     np.testing.assert_array_equal(after, obs)

@@ -8,10 +8,11 @@ and with the same arithmetic: the predictor, the corrector around Newton's metho
 reactions. Per gripper it sums what a control interval reads (Newton iterations, the impulses of the contact
 reactions) and ramps κ̄ at its rate (:func:`commit_step`).
 
-It stops before a step that any running gripper does not settle (Newton failed, the corrector spent its budget, a
-coordinate is not finite) and says which: the simulator then takes that step on its adaptive path, which halves
-it, and commits the outcome through the same :func:`commit_step`, then calls :func:`take_steps` again for the rest.
-So a gripper's trajectory does not depend on which path stepped it.
+A gripper that does not settle a step (Newton failed or the corrector spent its budget) is left ``pending`` while
+the others take the step, and the call returns: the simulator halves that step for the pending grippers alone, as
+its adaptive path does, and commits their outcome through the same :func:`commit_step`, then calls
+:func:`take_steps` again for the rest. So a gripper's trajectory does not depend on which path stepped it, nor on
+what else shares its batch.
 """
 
 from __future__ import annotations
@@ -82,46 +83,54 @@ class Interval(NamedTuple):
     """Σ max(R_n, 0)·Δt of every node over the steps taken [N·s], (R, N)."""
     impulse: np.ndarray
     """Σ R·Δt of every node, world frame [N·s], (R, N, 3)."""
+    pending: np.ndarray
+    """Running grippers that did not settle the step where :func:`take_steps` returned, (B,) bool: the adaptive path
+    takes that step for them."""
+    halve: bool
+    """Whether a step that a gripper does not settle is halved (``NewtonSettings.max_step_halvings`` > 0); if not,
+    it is taken as it is when Newton converged (the corrector's budget spent) and fails otherwise."""
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def commit_step(dt, ok, new, iterations, normal_reaction, reaction, state, interval):
-    """Takes a step of length ``dt`` [s] into the running grippers that it left ``ok`` (B,) bool: copies their part
-    of ``new`` (:class:`WorkingState`) into ``state``, adds their Newton ``iterations`` (B,) and the impulses of
-    their ``normal_reaction`` (R, N) and ``reaction`` (R, N, 3) [N] into ``interval`` (:class:`Interval`), ramps
-    their κ̄ and advances their clocks. A running gripper that the step did not leave ok stops and fails."""
-    n_rods = state.q.shape[0]
-    n_fingers = n_rods // ok.shape[0]
-    for b in range(ok.shape[0]):
-        if not interval.running[b]:
+def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, state, interval):
+    """Takes a step of length ``dt`` [s] into the running grippers ``grippers`` (m,) of ``state``
+    (:class:`WorkingState`) from the m grippers of ``new``, those the step left ``ok`` (m,) bool: copies their state,
+    adds their Newton ``iterations`` (m,) and the impulses of their ``normal_reaction`` (m·F, N) and ``reaction``
+    (m·F, N, 3) [N] into ``interval`` (:class:`Interval`), ramps their κ̄ and advances their clocks. A running gripper
+    that the step did not leave ok stops and fails; a ``pending`` one is left as it is."""
+    n_fingers = state.q.shape[0] // interval.running.shape[0]
+    for j in range(grippers.shape[0]):
+        b = grippers[j]
+        if not interval.running[b] or interval.pending[b]:  # stopped, or left for the adaptive path
             continue
-        if not ok[b]:
+        if not ok[j]:
             interval.running[b] = False
             interval.failed[b] = True
             continue
-        for r in range(b * n_fingers, (b + 1) * n_fingers):
-            state.q[r] = new.q[r]
-            state.velocity[r] = new.velocity[r]
-            state.acceleration[r] = new.acceleration[r]
-            state.held[r] = new.held[r]
+        for f in range(n_fingers):
+            r, s = b * n_fingers + f, j * n_fingers + f  # the rod in state and in new
+            state.q[r] = new.q[s]
+            state.velocity[r] = new.velocity[s]
+            state.acceleration[r] = new.acceleration[s]
+            state.held[r] = new.held[s]
             if state.hold_offset.shape[0] > 0:
-                state.hold_offset[r] = new.hold_offset[r]
+                state.hold_offset[r] = new.hold_offset[s]
             if state.tangent.shape[0] > 0:
-                state.tangent[r] = new.tangent[r]
-                state.director[r] = new.director[r]
-                state.reference_twist[r] = new.reference_twist[r]
+                state.tangent[r] = new.tangent[s]
+                state.director[r] = new.director[s]
+                state.reference_twist[r] = new.reference_twist[s]
             for i in range(normal_reaction.shape[1]):
-                interval.normal_impulse[r, i] += max(normal_reaction[r, i], 0.0) * dt
+                interval.normal_impulse[r, i] += max(normal_reaction[s, i], 0.0) * dt
                 for d in range(3):
-                    interval.impulse[r, i, d] += reaction[r, i, d] * dt
+                    interval.impulse[r, i, d] += reaction[s, i, d] * dt
             ramped = interval.natural_curvature[r] + interval.curvature_rate[r] * dt
             interval.natural_curvature[r] = min(max(ramped, interval.curvature_low), interval.curvature_high)
         if state.body_position.shape[0] > 0:
-            state.body_position[b] = new.body_position[b]
-            state.body_velocity[b] = new.body_velocity[b]
-            state.body_orientation[b] = new.body_orientation[b]
-            state.body_angular_velocity[b] = new.body_angular_velocity[b]
-        interval.newton_iterations[b] += iterations[b]
+            state.body_position[b] = new.body_position[j]
+            state.body_velocity[b] = new.body_velocity[j]
+            state.body_orientation[b] = new.body_orientation[j]
+            state.body_angular_velocity[b] = new.body_angular_velocity[j]
+        interval.newton_iterations[b] += iterations[j]
         interval.clock[b] += dt
 
 
@@ -133,8 +142,9 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
     frames in 3-D), ``terms``, ``solver`` and ``geometry`` are the plain fields that
     :func:`~.corrector.solve_with_contact` takes, ``projection`` (R, D, 3) rod coordinates from world vectors;
     ``body`` the free bodies' arrays, or None for a fixed object.
-    Returns the index of the first step it did not take (``n_steps`` when it took them all): one that a running
-    gripper did not settle, which the caller takes on the adaptive path."""
+    Returns the index of the step where it stopped: ``n_steps`` when it took them all; a step that some running
+    grippers did not settle, which the others took and the ``pending`` ones (``interval.pending``) have still to take
+    on the adaptive path; or a step that no gripper runs to take."""
     n_rods, n_nodes, stride = state.q.shape
     n_fingers = solver[5]
     n_grippers = n_rods // n_fingers
@@ -160,7 +170,11 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
     reaction, normal_reaction = np.empty((n_rods, n_nodes, 3)), np.empty((n_rods, n_nodes))
     ok = np.empty(n_grippers, dtype=np.bool_)
     most = np.zeros(n_grippers, dtype=np.int64)
+    every = np.arange(n_grippers)
+    interval.pending[:] = False
     for k in range(first, n_steps):
+        if not interval.running.any():
+            return k
         project_water(geometry[5], gripper_water[k], water)
         predict(state.q, state.velocity, state.acceleration, dt, q_pred, new.q)
         new.held[:, :] = state.held
@@ -199,21 +213,27 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
         if not planar:
             rod3d_update_frames(new.q, state.tangent, state.director, state.reference_twist, new.tangent,
                                 new.director, new.reference_twist)
+        any_pending = False
         for b in range(n_grippers):
-            settled = True
+            all_converged, resolved = True, True
             most[b] = 0
             for r in range(b * n_fingers, (b + 1) * n_fingers):
-                settled = settled and converged[r] and not changed[r]
+                all_converged = all_converged and converged[r]
+                resolved = resolved and not changed[r]
                 most[b] = max(most[b], iterations[r])
-            ok[b] = settled and np.isfinite(new.q[b * n_fingers:(b + 1) * n_fingers]).all() \
+            # as the adaptive path: a step not settled is halved, or without halvings kept if Newton converged
+            interval.pending[b] = interval.running[b] and interval.halve and not (all_converged and resolved)
+            any_pending = any_pending or interval.pending[b]
+            ok[b] = all_converged and not interval.pending[b] \
+                and np.isfinite(new.q[b * n_fingers:(b + 1) * n_fingers]).all() \
                 and np.isfinite(new.velocity[b * n_fingers:(b + 1) * n_fingers]).all()
             if free_body:
                 ok[b] = ok[b] and np.isfinite(new.body_position[b]).all() and np.isfinite(new.body_velocity[b]).all()
-            if interval.running[b] and not ok[b]:
-                return k
         contact_reactions(new.q, residual, new.held, friction, geometry[0], geometry[1], geometry[5], reaction,
                           normal_reaction)
-        commit_step(dt, ok, new, most, normal_reaction, reaction, state, interval)
+        commit_step(dt, every, ok, new, most, normal_reaction, reaction, state, interval)
+        if any_pending:  # the others took the step; the pending ones keep their state for the adaptive path
+            return k
     return n_steps
 
 
