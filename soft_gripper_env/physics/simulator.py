@@ -407,8 +407,8 @@ class Simulator:
         ``interval`` as the compiled steps commit theirs."""
         result = self._step_adaptive(self._state_of(work, time), interval.natural_curvature, dt,
                                      self.scene.newton.max_step_halvings)
-        self._commit(self, np.arange(self.batch_size), result.converged & finite(result.state),
-                     result.newton_iterations, result, dt, work, interval)
+        self._commit(np.arange(self.batch_size), result.converged & finite(result.state), result.newton_iterations,
+                     result, dt, work, interval)
 
     def _halve_pending(self, work: WorkingState, time: float, dt: float, interval: Interval) -> None:
         """The step at ``time`` [s] of :meth:`advance` for the grippers that the compiled steps left pending: two
@@ -419,20 +419,19 @@ class Simulator:
         natural_curvature = interval.natural_curvature.reshape(self.batch_size, -1)[grippers].ravel()
         sub, first, second = self._halves(take_grippers(self._state_of(work, time), grippers), grippers,
                                           natural_curvature, dt, self.scene.newton.max_step_halvings)
-        self._commit(sub, grippers, first.converged & second.converged & finite(second.state),
-                     first.newton_iterations + second.newton_iterations, second, dt, work, interval)
+        sub._commit(grippers, first.converged & second.converged & finite(second.state),
+                    first.newton_iterations + second.newton_iterations, second, dt, work, interval)
 
-    @staticmethod
-    def _commit(sim: Simulator, grippers: np.ndarray, ok: np.ndarray, iterations: np.ndarray, result: StepResult,
-                dt: float, work: WorkingState, interval: Interval) -> None:
-        """Commits ``result``, a step of ``sim``'s grippers (this batch's ``grippers``), through
-        :func:`~.solvers.stepping.commit_step`; its contact reactions are the step's last (a halved step's second
-        half's)."""
-        R, N = sim.n_rods, sim.disc.n_nodes
+    def _commit(self, grippers: np.ndarray, ok: np.ndarray, iterations: np.ndarray, result: StepResult, dt: float,
+                work: WorkingState, interval: Interval) -> None:
+        """Commits ``result``, a step of this simulator's grippers, into the grippers ``grippers`` of an advancing
+        batch's ``work`` and ``interval`` through :func:`~.solvers.stepping.commit_step`; its contact reactions are
+        the step's last (a halved step's second half's)."""
+        R, N = self.n_rods, self.disc.n_nodes
         contact = result.contact
         normal = np.zeros((R, N)) if contact is None else contact.normal_reaction.reshape(R, N)
         reaction = np.zeros((R, N, 3)) if contact is None else contact.reaction.reshape(R, N, 3)
-        commit_step(dt, grippers, ok, sim._working_state(result.state, copy=False), iterations, normal, reaction,
+        commit_step(dt, grippers, ok, self._working_state(result.state, copy=False), iterations, normal, reaction,
                     work, interval)
 
     def _working_state(self, state: RodState, copy: bool) -> WorkingState:

@@ -185,8 +185,10 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
         corrector[:] = 0
         step = (state.q, q_pred, interval.natural_curvature, water, dt, near)
         result = (converged, iterations, ratio, residual, corrector, changed)
+        new.hold_offset[:, :, :] = state.hold_offset  # (empty for a fixed object)
+        holds = (new.held, new.hold_offset, projection, sliding, friction, measured, geometry[0], geometry[1],
+                 geometry[2], geometry[3])
         if free_body:
-            new.hold_offset[:, :, :] = state.hold_offset
             for b in range(n_grippers):
                 for d in range(3):
                     new.body_position[b, d] = state.body_position[b, d] + dt * state.body_velocity[b, d]
@@ -195,15 +197,9 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
             old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
             motion = (new.body_position, new.body_angular_velocity, new.body_orientation, old, gripper_water[k],
                       water_acceleration)
-            holds = (new.held, new.hold_offset, projection, sliding, friction, measured, geometry[0], geometry[1],
-                     geometry[2], geometry[3])
-            solve_with_contact(new.q, step, rods, terms, solver, holds, hold_at, geometry,
-                               (body, motion), result)
+            solve_with_contact(new.q, step, rods, terms, solver, holds, hold_at, geometry, (body, motion), result)
         else:
-            holds = (new.held, state.hold_offset, projection, sliding, friction, measured, geometry[0], geometry[1],
-                     geometry[2], geometry[3])
-            solve_with_contact(new.q, step, rods, terms, solver, holds, hold_at, geometry,
-                               None, result)
+            solve_with_contact(new.q, step, rods, terms, solver, holds, hold_at, geometry, None, result)
         finish(new.q, state.q, state.velocity, dt, new.velocity, new.acceleration)
         if free_body:
             for b in range(n_grippers):
