@@ -61,20 +61,22 @@ def factor_banded_symmetric(a, free, row_scratch):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def solve_factored(a, x, free):
-    """Solve with a band factored by :func:`factor_banded_symmetric`, in place on ``x`` (n,); fixed DOFs get 0."""
+def solve_factored(a, x, free, first):
+    """Solve with a band factored by :func:`factor_banded_symmetric`, in place on ``x`` (n,); fixed DOFs get 0.
+    ``x`` is zero above row ``first`` (0 where nothing is known), and so is L⁻¹·x: the forward passes start there.
+    """
     n, kd1 = a.shape
     kd = kd1 - 1
     for i in range(n):
         if not free[i]:
             x[i] = 0.0
-    for i in range(n):  # L y = b
+    for i in range(first, n):  # L y = b
         s = x[i]
         row = a[i]
         for k in range(max(0, i - kd), i):
             s -= row[kd - i + k] * x[k]
         x[i] = s
-    for i in range(n):  # D z = y
+    for i in range(first, n):  # D z = y
         x[i] /= a[i, kd]
     for i in range(n - 1, -1, -1):  # Lᵀ x = z
         xi = x[i]
@@ -90,5 +92,5 @@ def solve_banded_symmetric_rod(a, x, free):
     if not factor_banded_symmetric(a, free, np.empty(a.shape[1])):
         x[:] = np.nan
         return False
-    solve_factored(a, x, free)
+    solve_factored(a, x, free, 0)
     return True

@@ -147,6 +147,10 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
     A rod that holds nothing (``coupled`` False, S = 0) only solves for x0, and leaves the other outputs as given
     (zero); a rod that is not ``active`` is left alone. Writes whether each rod's factorisation succeeded into
     ``factored`` and returns the number that failed.
+
+    S is non-zero only on the held nodes' rows, a few of the rod's, so A·S, Sᵀ·A·S and the products with (A·S)_F
+    visit only the rows within a bandwidth of them, and X's forward substitution starts there: the same sums in the
+    same order less their zero terms, so the same bits, at about half the cost of a touching rod's elimination.
     """
     n_rods, n, kd1 = band.shape
     kd = kd1 - 1
@@ -156,22 +160,24 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
         if not active[r]:
             continue
         a = band[r]
+        first, last = n, -1  # the rows where A·S may be non-zero: S's (the held DOFs) widened by the band
         if coupled[r]:  # Sᵀ·A·S needs A before it is factored
             s = coupling[r]
-            product[:, :] = 0.0  # A·S from the symmetric lower band
-            for i in range(n):
-                for j in range(max(0, i - kd), i + 1):
-                    value = a[i, kd - i + j]
+            held_first, held_last = _nonzero_rows(s)
+            if held_last >= 0:
+                first, last = max(0, held_first - kd), min(n - 1, held_last + kd)
+            product[:, :] = 0.0
+            for i in range(first, last + 1):  # A·S from the symmetric lower band, each sum in ascending column
+                for j in range(max(i - kd, held_first), min(i + kd, held_last) + 1):
+                    value = a[i, kd - i + j] if j <= i else a[j, kd - j + i]
                     if value == 0.0:
                         continue
                     for k in range(6):
                         product[i, k] += value * s[j, k]
-                        if i != j:
-                            product[j, k] += value * s[i, k]
             for k in range(6):
                 for m in range(6):
                     total = 0.0
-                    for i in range(n):
+                    for i in range(held_first, held_last + 1):
                         total += s[i, k] * product[i, m]
                     body_block[r, k, m] = total
         factored[r] = factor_banded_symmetric(a, free[r], row)
@@ -179,27 +185,39 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
             failures += 1
             x0[r, :] = np.nan
             continue
-        solve_factored(a, x0[r], free[r])
+        solve_factored(a, x0[r], free[r], 0)
         if not coupled[r]:
             continue
         for k in range(6):
             for i in range(n):
                 column[i] = product[i, k] if free[r, i] else 0.0
-            solve_factored(a, column, free[r])
+            solve_factored(a, column, free[r], first)
             x_coupling[r, :, k] = column
         for k in range(6):
             total = 0.0
-            for i in range(n):
+            for i in range(first, last + 1):
                 if free[r, i]:
                     total += product[i, k] * x0[r, i]
             body_rhs[r, k] = total
             for m in range(6):
                 total = 0.0
-                for i in range(n):
+                for i in range(first, last + 1):
                     if free[r, i]:
                         total += product[i, k] * x_coupling[r, i, m]
                 body_block[r, k, m] -= total
     return failures
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _nonzero_rows(s):
+    """The first and last rows of ``s`` (n, 6) with a non-zero entry; (n, −1) when there is none."""
+    first, last = s.shape[0], -1
+    for i in range(s.shape[0]):
+        for k in range(6):
+            if s[i, k] != 0.0:
+                first, last = min(first, i), i
+                break
+    return first, last
 
 
 @njit(cache=True, error_model="numpy", inline="always")

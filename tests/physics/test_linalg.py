@@ -1,0 +1,95 @@
+"""The banded solve and the elimination of the rods from the coupled Newton system, against dense linear algebra."""
+
+import numpy as np
+import pytest
+
+from soft_gripper_env.physics.kernels.linalg import factor_banded_symmetric, solve_banded_symmetric_rod, solve_factored
+from soft_gripper_env.physics.solvers.newton import eliminate_rods
+
+N_NODES = 20
+
+
+def _system(stride: int, seed: int):
+    """A symmetric positive definite Newton matrix of one rod, dense (n, n) and in band storage (n, kd+1)."""
+    rng = np.random.default_rng(seed)
+    n, kd = N_NODES * stride, 3 * stride - 1
+    dense = np.zeros((n, n))
+    for i in range(n):
+        for j in range(max(0, i - kd), i + 1):
+            dense[i, j] = dense[j, i] = rng.normal()
+    dense += np.eye(n) * 4.0 * kd  # diagonally dominant, as the mass term makes it
+    band = np.zeros((n, kd + 1))
+    for i in range(n):
+        for j in range(max(0, i - kd), i + 1):
+            band[i, kd - i + j] = dense[i, j]
+    return dense, band, rng
+
+
+def _dense_solve(dense, rhs, free):
+    """A_FF⁻¹·rhs_F, zero on fixed DOFs."""
+    x = np.zeros_like(rhs)
+    x[free] = np.linalg.solve(dense[np.ix_(free, free)], rhs[free])
+    return x
+
+
+@pytest.mark.parametrize("stride", [2, 4])
+def test_banded_solve_matches_dense(stride):
+    dense, band, rng = _system(stride, 1)
+    n = dense.shape[0]
+    free = np.ones(n, dtype=bool)
+    free[:2 * stride] = False  # the clamp
+    free[rng.choice(n, 5, replace=False)] = False
+    rhs = rng.normal(size=n)
+    x = rhs.copy()
+    assert solve_banded_symmetric_rod(band.copy(), x, free)
+    np.testing.assert_allclose(x, _dense_solve(dense, rhs, free), rtol=1e-12, atol=1e-14)
+
+
+def test_solve_from_a_first_row_is_the_full_solve():
+    """A right-hand side zero above row ``first`` solves to the same bits from there as from row 0."""
+    dense, band, rng = _system(4, 2)
+    n = dense.shape[0]
+    free = np.ones(n, dtype=bool)
+    factored = band.copy()
+    assert factor_banded_symmetric(factored, free, np.empty(band.shape[1]))
+    for first in (0, 1, 37, n - 1):
+        rhs = np.zeros(n)
+        rhs[first:] = rng.normal(size=n - first)
+        full, partial = rhs.copy(), rhs.copy()
+        solve_factored(factored, full, free, 0)
+        solve_factored(factored, partial, free, first)
+        np.testing.assert_array_equal(partial, full)
+        np.testing.assert_allclose(full, _dense_solve(dense, rhs, free), rtol=1e-11, atol=1e-13)
+
+
+@pytest.mark.parametrize("stride", [2, 4])
+@pytest.mark.parametrize("held", [(15, 16, 17), (0, 1), (18, 19), (3, 12), ()])
+def test_eliminate_rods_matches_the_dense_schur_complement(stride, held):
+    """x0 = A_FF⁻¹·(−G)_F, X = A_FF⁻¹·(A·S)_F, the body's block Sᵀ·A·S − (A·S)_Fᵀ·X and its right-hand side
+    (A·S)_Fᵀ·x0, for held nodes anywhere along the rod (the elimination only visits the rows S reaches)."""
+    dense, band, rng = _system(stride, 3 + len(held))
+    n = dense.shape[0]
+    dim = 2 if stride == 2 else 3
+    coupling = np.zeros((n, 6))
+    free = np.ones(n, dtype=bool)
+    free[:2 * stride] = False
+    for node in held:
+        rows = slice(node * stride, node * stride + dim)
+        coupling[rows] = rng.normal(size=(dim, 6))
+        free[rows] = False  # a stuck node moves with the body
+    minus_g = rng.normal(size=n)
+    x0, x_coupling = minus_g[None].copy(), np.zeros((1, n, 6))
+    block, rhs, factored = np.zeros((1, 6, 6)), np.zeros((1, 6)), np.zeros(1, dtype=bool)
+    scratch = (np.empty((n, 6)), np.empty(n), np.empty(band.shape[1]))
+    failures = eliminate_rods(band[None].copy(), coupling[None], free[None], np.ones(1, dtype=bool),
+                              np.ones(1, dtype=bool), x0, x_coupling, block, rhs, factored, scratch)
+    assert failures == 0 and factored[0]
+    product = dense @ coupling
+    expected_x0 = _dense_solve(dense, minus_g, free)
+    expected_x = np.stack([_dense_solve(dense, product[:, k], free) for k in range(6)], axis=1)
+    product_free = np.where(free[:, None], product, 0.0)
+    np.testing.assert_allclose(x0[0], expected_x0, rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(x_coupling[0], expected_x, rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(block[0], coupling.T @ product - product_free.T @ expected_x, rtol=1e-10,
+                               atol=1e-10)
+    np.testing.assert_allclose(rhs[0], product_free.T @ expected_x0, rtol=1e-10, atol=1e-12)
