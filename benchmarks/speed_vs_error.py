@@ -79,6 +79,8 @@ OUTCOME_SETTINGS = {
     for label, model, dt, tolerance, passes in (
         (OUTCOME_REFERENCE, "3d", 0.0025, 1e-9, None),
         ("3d, dt 0.0025, tol 1e-6", "3d", 0.0025, 1e-6, None),
+        ("3d, dt 0.0025, tol 1e-4, friction 2 passes", "3d", 0.0025, 1e-4, 2),
+        ("3d, dt 0.0025, tol 1e-4, friction 1 pass", "3d", 0.0025, 1e-4, 1),
         ("3d, dt 0.005", "3d", 0.005, 1e-6, None),
         ("3d, dt 0.005, tol 1e-4", "3d", 0.005, 1e-4, None),
         (OUTCOME_DEFAULT, "3d", 0.005, 1e-4, 2),
