@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from ..scene.objects import GraspedObject
+from .linalg import symmetric_band_entry
 
 STICK_SPEED = 1e-3
 """The slip speed [m/s] below which a regularised friction (the palm's, and the fingers' on each other) grows in
@@ -242,7 +243,7 @@ def rotate_node(band, first, basis):
             if abs(i - j) > kd:
                 old[a] = 0.0
             else:
-                old[a] = band[i, kd - i + j] if j <= i else band[j, kd - j + i]
+                old[a] = symmetric_band_entry(band, i, j)
         for a in range(dim):
             i = first + a
             if abs(i - j) > kd:

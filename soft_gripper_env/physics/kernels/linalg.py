@@ -13,6 +13,13 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def symmetric_band_entry(band, i, j):
+    """A[i, j] of one rod's symmetric band (n, kd+1), for |i − j| ≤ kd, read from the stored lower triangle."""
+    kd = band.shape[1] - 1
+    return band[i, kd - i + j] if j <= i else band[j, kd - j + i]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def scatter_contiguous(band, offset, hessian, m):
     """Add the symmetric m×m ``hessian`` of DOFs offset … offset+m−1 into one rod's band (n, kd+1)."""
     kd = band.shape[1] - 1

@@ -33,7 +33,7 @@ from ..kernels.assembly import StepInputs, assemble_rod, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
 from ..kernels.contact import onto_surface, rotate_node, tangent_basis
 from ..kernels.finger_contact import near_fingers_of_gripper
-from ..kernels.linalg import factor_banded_symmetric, solve_factored
+from ..kernels.linalg import factor_banded_symmetric, solve_factored, symmetric_band_entry
 from ..scene.forces import ForceTerms
 
 
@@ -169,7 +169,7 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
             product[:, :] = 0.0
             for i in range(first, last + 1):  # A·S from the symmetric lower band, each sum in ascending column
                 for j in range(max(i - kd, held_first), min(i + kd, held_last) + 1):
-                    value = a[i, kd - i + j] if j <= i else a[j, kd - j + i]
+                    value = symmetric_band_entry(a, i, j)
                     if value == 0.0:
                         continue
                     for k in range(6):
