@@ -450,3 +450,20 @@ def test_contact_reactions_match_a_direct_computation(stride, dim):
             outward = q[r, i, :dim] - (starts[r] + t * segment)
             expected = np.dot(local, outward / np.linalg.norm(outward))
             assert normal[r, i] == pytest.approx(expected, rel=1e-12, abs=1e-12)
+
+
+def test_a_node_held_on_the_object_segment_reports_no_normal_reaction():
+    """A planar finger sees a sphere that has left its plane as a section of radius zero, a point: a node held there
+    lies on the object's segment, where the normal is undefined. Its reported normal reaction is 0, not 0/0 (which
+    once reached a training run's reward as NaN); its reaction is reported as it is."""
+    q = np.zeros((1, 3, 2))
+    q[0, :, 0] = [0.0, 0.01, 0.02]
+    point = q[0, 1, :2].copy()  # the section's centre, on node 1
+    residual = np.array([[0.0, 0.0, 0.3, -0.2, 0.0, 0.0]])
+    held = np.array([[False, True, False]])
+    friction = np.zeros((1, 3, 2))
+    reaction, normal = np.empty((1, 3, 3)), np.empty((1, 3))
+    contact_reactions(q, residual, held, friction, point[None], point[None], np.array([[1.0, 0.0, 0.0]]), reaction,
+                      normal)
+    assert np.isfinite(normal).all() and normal[0, 1] == 0.0
+    assert np.isfinite(reaction).all() and reaction[0, 1, 0] == 0.3

@@ -96,7 +96,9 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
             along = 0.0
             for k in range(dim):
                 along += local[k] * (q[r, i, k] - nearest[k])
-            normal[r, i] = along / distance
+            # On the segment itself (a planar section shrunk to a point) the normal is undefined and the object's
+            # surface there faces out of the finger's plane: no normal reaction within it.
+            normal[r, i] = along / distance if distance > 0.0 else 0.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -244,7 +244,8 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
 
     - ``adhesive``: held nodes whose normal reaction R_n pulls by more than Newton's force tolerance
       ``solver.force_tolerance`` [N] (a reaction is known to that tolerance: one pulling by less is zero, and
-      releasing it would only make the corrector cycle);
+      releasing it would only make the corrector cycle), and held nodes on the segment itself, where a planar
+      finger's section of a sphere that has left its plane has shrunk to a point;
     - ``new_hold``: free nodes that penetrate the object, with their hold points in ``hold_at``
       (:func:`~..kernels.contact.find_penetrations`);
     - ``slide`` and ``friction``: a stuck node whose tangential reaction exceeds μ·R_n slides, against a friction of
@@ -276,6 +277,12 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
             if not held[r, i]:
                 continue
             distance = distance_to_segment(positions[r, i], view.starts[r], view.ends[r], nearest)
+            if distance == 0.0:
+                # Held on the segment itself: a planar finger's section of a sphere that has left its plane
+                # shrinks to a point, which cannot hold a node (and has no normal), so the hold is let go.
+                adhesive[r, i] = True
+                changed[r] = True
+                continue
             normal_reaction = 0.0
             for d in range(dim):
                 normal[d] = (positions[r, i, d] - nearest[d]) / distance
