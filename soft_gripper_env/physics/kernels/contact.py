@@ -184,16 +184,28 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def onto_surface(point, start, end, radius, normal):
-    """Moves ``point`` (D,) in place along the normal to the surface at ``radius`` from the segment start–end, and
-    writes that outward unit normal into ``normal`` (D,); returns False (and leaves both) where the point lies on
-    the segment itself, whose normal is undefined."""
-    nearest = np.empty(point.size)
+def outward_normal(point, start, end, nearest, normal):
+    """The unit direction from the segment start–end to ``point`` (D,), into ``normal`` (D,), with the segment's
+    nearest point in ``nearest`` (D,); returns False (and leaves ``normal``) where the point lies on the segment
+    itself, whose normal is undefined (a planar finger's section of a sphere that has left its plane shrinks to a
+    point)."""
     distance = distance_to_segment(point, start, end, nearest)
     if distance == 0.0:
         return False
     for k in range(point.size):
         normal[k] = (point[k] - nearest[k]) / distance
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def onto_surface(point, start, end, radius, normal):
+    """Moves ``point`` (D,) in place along the normal to the surface at ``radius`` from the segment start–end, and
+    writes that outward unit normal into ``normal`` (D,); returns False (and leaves both) where the point lies on
+    the segment itself (:func:`outward_normal`)."""
+    nearest = np.empty(point.size)
+    if not outward_normal(point, start, end, nearest, normal):
+        return False
+    for k in range(point.size):
         point[k] = nearest[k] + radius * normal[k]
     return True
 

@@ -32,7 +32,7 @@ from numba import njit
 
 from ..kernels.assembly import StepInputs, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, BodyState, body_in_rod_frames, planar_body_basis, turned
-from ..kernels.contact import ObjectView, distance_to_segment, find_penetrations, within_reach
+from ..kernels.contact import ObjectView, find_penetrations, outward_normal, within_reach
 from ..kernels.finger_contact import find_near_fingers
 from ..scene.forces import ForceTerms
 from ..scene.objects import PENETRATION_TOLERANCE
@@ -276,16 +276,13 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
             changes.slide[r, i] = False
             if not held[r, i]:
                 continue
-            distance = distance_to_segment(positions[r, i], view.starts[r], view.ends[r], nearest)
-            if distance == 0.0:
-                # Held on the segment itself: a planar finger's section of a sphere that has left its plane
-                # shrinks to a point, which cannot hold a node (and has no normal), so the hold is let go.
+            if not outward_normal(positions[r, i], view.starts[r], view.ends[r], nearest, normal):
+                # Held on the segment itself, a section shrunk to a point: it cannot hold a node, so it lets go.
                 adhesive[r, i] = True
                 changed[r] = True
                 continue
             normal_reaction = 0.0
             for d in range(dim):
-                normal[d] = (positions[r, i, d] - nearest[d]) / distance
                 reaction[d] = residual[r, stride * i + d]
                 normal_reaction += reaction[d] * normal[d]
             if normal_reaction < -force_tolerance:
