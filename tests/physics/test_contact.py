@@ -467,3 +467,40 @@ def test_a_node_held_on_the_object_segment_reports_no_normal_reaction():
                       normal)
     assert np.isfinite(normal).all() and normal[0, 1] == 0.0
     assert np.isfinite(reaction).all() and reaction[0, 1, 0] == 0.3
+
+
+def test_the_corrector_lets_go_of_a_node_held_on_the_object_segment():
+    """The corrector's test after a solve releases a hold on the object's segment itself (a planar section shrunk to
+    a point, which has no outward normal) and marks its rod changed, whatever the hold's reaction; a hold off the
+    segment with a pushing reaction stays. Without the release the test divides 0 by 0 there."""
+    from soft_gripper_env.physics.kernels.contact import ObjectView
+    from soft_gripper_env.physics.solvers.corrector import ContactChanges, contact_changes
+    from soft_gripper_env.physics.solvers.newton import Holds, SolverArrays
+
+    n_rods, n_nodes, dim = 2, 3, 2
+    positions = np.zeros((n_rods, n_nodes, dim))
+    positions[:, :, 0] = [0.0, 0.01, 0.02]
+    point = np.array([0.01, 0.0])  # node 1's position: rod 0's section is this point
+    starts = np.array([point, [0.01, -0.005]])  # rod 1 sees a circle of radius 5 mm around (0.01, −0.005)
+    ends = starts.copy()
+    radii = np.array([[0.0] * n_nodes, [0.005] * n_nodes])
+    stride = 3
+    residual = np.zeros((n_rods, n_nodes * stride))
+    residual[:, stride * 1 + 1] = 0.2  # node 1 pushed along +y: outward from rod 1's centre (and pulling nowhere)
+    held = np.zeros((n_rods, n_nodes), dtype=np.bool_)
+    held[:, 1] = True
+    holds = Holds(held, np.zeros((n_rods, n_nodes, 3)), np.zeros((n_rods, dim, 3)), np.zeros_like(held),
+                  np.zeros((n_rods, n_nodes, dim)), np.ones((n_rods, n_nodes * stride), dtype=np.bool_), starts, ends,
+                  radii, np.zeros(n_nodes))
+    solver = SolverArrays(np.ones(n_nodes * stride), np.ones((n_rods, n_nodes * stride)),
+                          np.ones((n_rods, n_nodes * stride), dtype=np.bool_), np.ones(6), 10, 1, 5, 2, 1, 1e-6, 0.1)
+    view = ObjectView(starts, ends, radii, np.ones(n_rods, dtype=np.bool_), np.zeros((n_rods, dim)))
+    changes = ContactChanges(np.zeros((n_rods, n_nodes), dtype=np.bool_), np.zeros((n_rods, n_nodes), dtype=np.bool_),
+                             positions.copy(), np.zeros((n_rods, n_nodes), dtype=np.bool_),
+                             np.zeros((n_rods, n_nodes, dim)), np.zeros((n_rods, n_nodes), dtype=np.bool_),
+                             np.zeros(n_rods, dtype=np.bool_))
+    contact_changes(positions, positions.copy(), positions.copy(), residual, holds, view, np.full(n_rods, np.inf),
+                    solver, True, True, changes)
+    assert changes.adhesive[0, 1] and changes.changed[0]
+    assert not changes.adhesive[1].any() and not changes.changed[1]
+    assert np.isfinite(changes.friction).all()
