@@ -81,6 +81,7 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
     n_fingers = finger_directions.shape[0]
     local = np.empty(dim)
     nearest = np.empty(dim)
+    unit = np.empty(dim)
     for r in range(n_rods):
         for i in range(n_nodes):
             for k in range(dim):
@@ -92,13 +93,12 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
                 for k in range(3):
                     reaction[r, i, k] = local[0] * finger_directions[r % n_fingers, k]
                 reaction[r, i, 2] += local[1]
-            distance = distance_to_segment(q[r, i, :dim], starts[r], ends[r], nearest)
-            along = 0.0
-            for k in range(dim):
-                along += local[k] * (q[r, i, k] - nearest[k])
             # On the segment itself (a planar section shrunk to a point) the normal is undefined and the object's
             # surface there faces out of the finger's plane: no normal reaction within it.
-            normal[r, i] = along / distance if distance > 0.0 else 0.0
+            normal[r, i] = 0.0
+            if outward_normal(q[r, i, :dim], starts[r], ends[r], nearest, unit):
+                for k in range(dim):
+                    normal[r, i] += local[k] * unit[k]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -178,6 +178,8 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
                 continue
             new_hold[r, i] = True
             found[r] += 1
+            # onto_surface's projection, in another order of rounding: that order changes a grasp's trajectory
+            # after a few hundred steps (a 1-ulp move of a hold point grows through stick-slip), so it stays.
             for k in range(dim):
                 hold_at[r, i, k] = nearest[k] + (point[k] - nearest[k]) * radius / distance
     return found
