@@ -429,7 +429,9 @@ def test_a_sliding_nodes_frame_turns_its_band_exactly(stride, dim):
 @pytest.mark.parametrize("stride, dim", [(2, 2), (4, 3)])
 def test_contact_reactions_match_a_direct_computation(stride, dim):
     """The reported reaction (held nodes' residual plus friction, to the world frame) and its normal part, against
-    the same quantities computed node by node in NumPy, for random rods of two grippers."""
+    the same quantities computed node by node in NumPy, for random rods of two grippers. A sliding node's stored
+    friction points anywhere here; what it exerts, and what is reported, is the same size turned into the surface's
+    tangent plane at the node (as in the solve): the normal part is the residual's alone."""
     rng = np.random.default_rng(11)
     n_fingers, n_rods, n_nodes = 3, 6, 5
     directions = np.array([[math.cos(a), math.sin(a), 0.0] for a in (0.3, 2.4, 4.5)])
@@ -442,14 +444,17 @@ def test_contact_reactions_match_a_direct_computation(stride, dim):
     contact_reactions(q, residual, held, friction, starts, ends, directions, reaction, normal)
     for r in range(n_rods):
         for i in range(n_nodes):
-            local = residual[r, i * stride:i * stride + dim] * held[r, i] + friction[r, i]
-            world = local if dim == 3 else local[0] * directions[r % n_fingers] + np.array([0.0, 0.0, local[1]])
-            np.testing.assert_allclose(reaction[r, i], world, rtol=1e-14, atol=1e-14)
             segment = ends[r] - starts[r]
             t = np.clip(np.dot(q[r, i, :dim] - starts[r], segment) / np.dot(segment, segment), 0.0, 1.0)
             outward = q[r, i, :dim] - (starts[r] + t * segment)
-            expected = np.dot(local, outward / np.linalg.norm(outward))
-            assert normal[r, i] == pytest.approx(expected, rel=1e-12, abs=1e-12)
+            unit = outward / np.linalg.norm(outward)
+            tangential = friction[r, i] - np.dot(friction[r, i], unit) * unit
+            acting = tangential * np.linalg.norm(friction[r, i]) / max(np.linalg.norm(tangential), 1e-300)
+            own = residual[r, i * stride:i * stride + dim] * held[r, i]
+            local = own + acting
+            world = local if dim == 3 else local[0] * directions[r % n_fingers] + np.array([0.0, 0.0, local[1]])
+            np.testing.assert_allclose(reaction[r, i], world, rtol=1e-12, atol=1e-12)
+            assert normal[r, i] == pytest.approx(np.dot(own, unit), rel=1e-12, abs=1e-12)
 
 
 def test_a_node_held_on_the_object_segment_reports_no_normal_reaction():

@@ -82,10 +82,16 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
     local = np.empty(dim)
     nearest = np.empty(dim)
     unit = np.empty(dim)
+    acting = np.empty(dim)
     for r in range(n_rods):
         for i in range(n_nodes):
+            # On the segment itself (a planar section shrunk to a point) the normal is undefined and the object's
+            # surface there faces out of the finger's plane: no normal reaction within it.
+            on_surface = outward_normal(q[r, i, :dim], starts[r], ends[r], nearest, unit)
+            if on_surface:  # a sliding node's friction acts along the surface at its current point, as in the solve
+                along_surface(friction[r, i], unit, acting)
             for k in range(dim):
-                local[k] = residual[r, i * stride + k] * held[r, i] + friction[r, i, k]
+                local[k] = residual[r, i * stride + k] * held[r, i] + (acting[k] if on_surface else friction[r, i, k])
             if dim == 3:
                 for k in range(3):
                     reaction[r, i, k] = local[k]
@@ -93,10 +99,8 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
                 for k in range(3):
                     reaction[r, i, k] = local[0] * finger_directions[r % n_fingers, k]
                 reaction[r, i, 2] += local[1]
-            # On the segment itself (a planar section shrunk to a point) the normal is undefined and the object's
-            # surface there faces out of the finger's plane: no normal reaction within it.
             normal[r, i] = 0.0
-            if outward_normal(q[r, i, :dim], starts[r], ends[r], nearest, unit):
+            if on_surface:
                 for k in range(dim):
                     normal[r, i] += local[k] * unit[k]
 
@@ -213,6 +217,24 @@ def onto_surface(point, start, end, radius, normal):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def along_surface(friction, normal, out):
+    """The friction force ``friction`` (D,) turned into the tangent plane of ``normal`` (D,), keeping its size: the
+    force a sliding node's friction exerts at its current point, whatever the surface's normal was when it was set."""
+    size = 0.0
+    along = 0.0
+    for d in range(friction.size):
+        size += friction[d] ** 2
+        along += friction[d] * normal[d]
+    tangential = 0.0
+    for d in range(friction.size):
+        out[d] = friction[d] - along * normal[d]
+        tangential += out[d] ** 2
+    scale = np.sqrt(size / tangential) if tangential > 0.0 else 0.0
+    for d in range(friction.size):
+        out[d] *= scale
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def tangent_basis(normal, basis):
     """An orthonormal basis (D, D) whose first column is the unit ``normal`` (D,) and whose others span its tangent
     plane, into ``basis``; the same normal always gives the same basis."""
@@ -285,5 +307,5 @@ def rotate_node(band, first, basis):
             band[first + a, kd - a + m] = value
 
 
-__all__ = ["ObjectView", "object_in_rod_frames", "contact_reactions", "within_reach", "find_penetrations",
-           "distance_to_segment", "onto_surface", "tangent_basis", "rotate_node"]
+__all__ = ["ObjectView", "along_surface", "object_in_rod_frames", "contact_reactions", "within_reach",
+           "find_penetrations", "distance_to_segment", "onto_surface", "tangent_basis", "rotate_node"]

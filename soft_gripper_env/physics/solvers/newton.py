@@ -31,7 +31,7 @@ from numba import njit
 
 from ..kernels.assembly import StepInputs, assemble_rod, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
-from ..kernels.contact import onto_surface, rotate_node, tangent_basis
+from ..kernels.contact import along_surface, onto_surface, rotate_node, tangent_basis
 from ..kernels.finger_contact import near_fingers_of_gripper
 from ..kernels.linalg import factor_banded_symmetric, solve_factored, symmetric_band_entry
 from ..scene.forces import ForceTerms
@@ -507,7 +507,7 @@ def _place_held_nodes(b, r, q, holds, coupling, rod_coupling, normals, body_resi
                 onto_surface(q[r, i, :dim], start, end, radius, scratch_normal)
             continue
         friction = np.empty(dim)
-        _along_surface(holds.friction[r, i], normals[i], friction)
+        along_surface(holds.friction[r, i], normals[i], friction)
         for k in range(6):
             along_normal = 0.0
             load = 0.0
@@ -516,23 +516,6 @@ def _place_held_nodes(b, r, q, holds, coupling, rod_coupling, normals, body_resi
                 load += motion_rows[d, k] * friction[d]
             rod_coupling[stride * i, k] = along_normal  # ξ_n follows the body; the tangents do not
             body_residual[k] += load  # the friction's reaction on the body: −(−f) on its point
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _along_surface(friction, normal, out):
-    """The friction force ``friction`` (D,) turned into the tangent plane of ``normal`` (D,), keeping its size."""
-    size = 0.0
-    along = 0.0
-    for d in range(friction.size):
-        size += friction[d] ** 2
-        along += friction[d] * normal[d]
-    tangential = 0.0
-    for d in range(friction.size):
-        out[d] = friction[d] - along * normal[d]
-        tangential += out[d] ** 2
-    scale = np.sqrt(size / tangential) if tangential > 0.0 else 0.0
-    for d in range(friction.size):
-        out[d] *= scale
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -557,7 +540,7 @@ def _slide_rows(r, holds, normals, residual, right_hand_side, band, tolerance_in
     for i in range(normals.shape[0]):
         if not (holds.held[r, i] and holds.sliding[r, i]):
             continue
-        _along_surface(holds.friction[r, i], normals[i], friction)
+        along_surface(holds.friction[r, i], normals[i], friction)
         first = stride * i
         for d in range(dim):
             residual[first + d] -= friction[d]
