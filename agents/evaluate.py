@@ -16,6 +16,7 @@ import argparse
 import json
 import time
 from collections.abc import Callable
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -124,10 +125,23 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
 
     config_file = model_dir / "config.json"
     act = ppo_policy(model, normalize, f"the policy in {model_dir}")
-    act.observation = "full"
-    if config_file.exists():
-        act.observation = json.loads(config_file.read_text()).get("task", {}).get("observation", "full")
+    act.trained_task = json.loads(config_file.read_text()).get("task", {}) if config_file.exists() else {}
+    act.observation = act.trained_task.get("observation", "full")
     return act
+
+
+ACTION_MAP = ("control_dt", "max_curvature_rate", "action_exponent", "curvature_range")
+"""The task's settings that say what an action does: a policy trained with other values would act wrongly, not
+differently, so :func:`main` refuses it."""
+
+
+def action_map_mismatch(trained_task: dict, task: GraspTask) -> str | None:
+    """Where a policy's training task (its config.json's ``task``) maps actions otherwise than ``task``: a sentence
+    naming each differing setting of :data:`ACTION_MAP` with both values, or None."""
+    today = asdict(task)
+    differing = [f"{name} = {trained_task[name]!r} (today {today[name]!r})" for name in ACTION_MAP
+                 if name in trained_task and not np.allclose(trained_task[name], today[name], rtol=1e-12, atol=0.0)]
+    return ", ".join(differing) or None
 
 
 def ppo_policy(model, normalize, name: str = "the policy") -> Callable[[np.ndarray], np.ndarray]:
@@ -185,6 +199,10 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--policy {args.policy} takes observations of {policy.observation_size} values, and the "
                      f"{args.model} model gives {expected} (a policy trained on observation = 'full' acts only in "
                      f"the rod model it was trained in; one trained on 'sensors' acts in both)")
+    mismatch = action_map_mismatch(getattr(policy, "trained_task", {}), GraspTask(model=args.model))
+    if mismatch:
+        parser.error(f"--policy {args.policy} was trained on a task whose actions act otherwise: {mismatch}; "
+                     f"evaluate it with the version of the package it was trained with")
     result = evaluate(policy, args.episodes, args.seed, num_envs=args.num_envs, model=args.model,
                       observation=observation)
     result.update(policy=args.policy, model=args.model, observation=observation)

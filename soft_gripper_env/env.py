@@ -131,7 +131,7 @@ class SoftGripperUnderwaterEnv(gym.Env):
     ======  ===========================================================================  =====
     index   meaning                                                                      unit
     ======  ===========================================================================  =====
-    0–F−1   natural-curvature rate of finger k: ``max_curvature_rate`` (0.5 1/s) ×         1/s
+    0–F−1   natural-curvature rate of finger k: ``max_curvature_rate`` (0.3 1/s) ×         1/s
             sign(a)·|a|³ (``action_exponent``); negative closes the finger
     ======  ===========================================================================  =====
 

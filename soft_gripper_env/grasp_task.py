@@ -105,8 +105,13 @@ class GraspTask:
     budget. Two passes make a grasping 3-D env step about 1.4× faster (a quarter of its physics steps otherwise
     spend the corrector's whole budget cycling on friction), and the grasp outcomes still agree with the fine
     reference's on 96.5–97.5 % of 200 seeds, 1.9–2.8 mm apart (``docs/speed_vs_error.md``)."""
-    max_curvature_rate: float = 0.5
-    """Natural-curvature rate of an action of ±1 [1/s] (κ̄ per node at the gripper's 20 nodes per finger)."""
+    max_curvature_rate: float = 0.3
+    """Natural-curvature rate of an action of ±1 [1/s] (κ̄ per node at the gripper's 20 nodes per finger): the
+    fastest closing. 0.3 1/s is the slowest approach that still catches the drifting specimen (the reactive
+    controller closing at 0.2 1/s loses the specimen on 21 of 96 tuning seeds, at 0.15 1/s on 36, at 0.3 1/s on 2);
+    a faster one only lets a policy meet the specimen harder (one control interval past the touch at 0.5 1/s adds
+    Δκ̄ = 0.025, about 5 N at a grip's 0.2 N per 0.001). PPO trained with 0.5 1/s peaked at a mean 4.2 N, with 0.3
+    1/s at 3.6 N and 6 points more success (docs/environment.md)."""
     action_exponent: float = 3.0
     """An action a in [−1, 1] sets the rate max_curvature_rate·sign(a)·|a|^p, p this exponent (dimensionless,
     ≥ 1): a grip's force follows κ̄ steeply (a κ̄ change of 0.001 presses about 0.2 N harder), so holding a fragile

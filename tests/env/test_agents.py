@@ -248,3 +248,22 @@ def test_scripts_reject_bad_arguments(tmp_path):
     assert out.returncode == 2 and "--timesteps = 0 must be at least 1" in out.stderr
     out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path), "--num-envs", "2", "--num-threads", "3")
     assert out.returncode == 2 and "--num-threads = 3 must be at most --num-envs = 2" in out.stderr
+
+
+def test_evaluate_refuses_a_policy_trained_on_another_action_map(tmp_path):
+    """A policy whose training task mapped actions to other curvature rates would act wrongly under today's map:
+    agents.evaluate names the setting and both values instead of evaluating it."""
+    import shutil
+
+    from agents.evaluate import action_map_mismatch
+
+    folder = tmp_path / "policy"
+    shutil.copytree(ROOT / "agents" / "pretrained", folder)
+    config = json.loads((folder / "config.json").read_text())
+    assert action_map_mismatch(config["task"], GraspTask()) is None  # the shipped policy fits today's task
+    config["task"]["max_curvature_rate"] = 0.5
+    config["task"]["curvature_range"] = [-0.25, 0.0]
+    (folder / "config.json").write_text(json.dumps(config))
+    out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1")
+    assert out.returncode == 2, out.stderr
+    assert "max_curvature_rate = 0.5 (today 0.3)" in out.stderr and "curvature_range = [-0.25, 0.0]" in out.stderr

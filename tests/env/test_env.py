@@ -96,7 +96,7 @@ def test_pickled_env_continues_identically(env):
 def test_reward_terms_sum_to_the_reward_and_info_types(env):
     obs, info = env.reset(seed=1)
     assert set(info["reward_terms"]) == {"reach", "contact", "hold", "rest", "pressure", "effort", "harm", "success"}
-    policy = RampPolicy(rate=-0.5)
+    policy = RampPolicy(rate=-GraspTask().max_curvature_rate)  # the action −1, the fastest closing
     touched = False
     reach = []
     for _ in range(20):
@@ -412,7 +412,7 @@ def test_reactive_policy_approaches_cages_and_regulates_the_force():
     with pytest.raises(ValueError, match=r"ReactivePolicy\.press_rate = 0\.0 1/s is outside"):
         ReactivePolicy(task, press_rate=0.0)
     with pytest.raises(ValueError, match=r"ReactivePolicy\.approach_rate = 0\.0 1/s is outside the allowed range "
-                                         r"\[-0\.5, 0\)"):
+                                         r"\[-0\.3, 0\)"):
         ReactivePolicy(task, approach_rate=0.0)
 
 
@@ -420,10 +420,11 @@ def test_the_cubic_action_map_and_its_inverse():
     """An action a sets the rate max_curvature_rate·sign(a)·|a|³; action_for_rate inverts it (and clips)."""
     task = GraspTask()
     actions = np.linspace(-1.0, 1.0, 41)
-    np.testing.assert_allclose(task.curvature_rate(actions), 0.5 * np.sign(actions) * np.abs(actions) ** 3)
+    assert task.max_curvature_rate == 0.3  # the fastest closing, 1/s
+    np.testing.assert_allclose(task.curvature_rate(actions), 0.3 * np.sign(actions) * np.abs(actions) ** 3)
     np.testing.assert_allclose(task.action_for_rate(task.curvature_rate(actions)), actions, atol=1e-12)
     assert task.action_for_rate(-2.0) == -1.0
-    linear = GraspTask(action_exponent=1.0)
+    linear = GraspTask(action_exponent=1.0, max_curvature_rate=0.5)
     np.testing.assert_allclose(linear.curvature_rate(actions), 0.5 * actions)
 
 
