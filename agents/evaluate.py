@@ -189,8 +189,9 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--num-envs = {args.num_envs} must be at least 1")
     if args.policy not in ("random", "ramp", "reactive", "pretrained") and not Path(args.policy).is_dir():
         parser.error(f"--policy = {args.policy!r} is not random, ramp, reactive, pretrained or a folder")
+    task = GraspTask(model=args.model)
     try:
-        policy = make_policy(args.policy, GraspTask(model=args.model), args.seed)
+        policy = make_policy(args.policy, task, args.seed)
     except FileNotFoundError as error:
         parser.error(str(error))
     observation = getattr(policy, "observation", "full")  # a trained policy observes what it was trained on
@@ -199,7 +200,7 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--policy {args.policy} takes observations of {policy.observation_size} values, and the "
                      f"{args.model} model gives {expected} (a policy trained on observation = 'full' acts only in "
                      f"the rod model it was trained in; one trained on 'sensors' acts in both)")
-    mismatch = action_map_mismatch(getattr(policy, "trained_task", {}), GraspTask(model=args.model))
+    mismatch = action_map_mismatch(getattr(policy, "trained_task", {}), task)
     if mismatch:
         parser.error(f"--policy {args.policy} was trained on a task whose actions act otherwise: {mismatch}; "
                      f"evaluate it with the version of the package it was trained with")
