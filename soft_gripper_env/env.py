@@ -202,11 +202,12 @@ class SoftGripperUnderwaterEnv(gym.Env):
     ========  ===========================================================================  =============
     reach     0.25 × mean over fingers of 1 − tanh(gap / 0.05 m)                           [0, 0.25]
     contact   0.25 × fraction of fingers touching                                          [0, 0.25]
-    hold      1.0 × (1 − tanh(d / 0.03 m)), d the distance to the grasp point; only while  [0, 1]
+    hold      1.0 × (1 − tanh(d / 0.05 m)), d the distance to the grasp point; only while  [0, 1]
               every finger touches
     rest      0.5 × (1 − tanh(|v| / 0.05 m/s)); only while every finger touches             [0, 0.5]
-    pressure  −0.5 × clip((F/F_max − 0.7)/0.3, 0, 1), F the largest sustained finger       [−0.5, 0]
-              force, F_max the fragility limit: a warning from 70 % of the limit on
+    pressure  −0.5 × clip((F/F_max − 0.7)/0.3, 0, 2), F the largest finger force of the   [−1, 0]
+              interval (50 ms mean), F_max the fragility limit: a warning from 70 % of
+              the limit that keeps growing to 1.3 times it
     effort    −0.05 × mean(action²)                                                        [−0.05, 0]
     ========  ===========================================================================  =============
 

@@ -56,11 +56,14 @@ class RewardWeights:
     """Object near the grasp point, 1 − tanh(d/hold_distance); only while every finger touches it."""
     rest: float = 0.5
     """Object at rest relative to the palm, 1 − tanh(|v|/rest_speed); only while every finger touches it."""
-    pressure: float = 0.5
-    """Penalty for pressing near the specimen's fragility limit: with F the largest sustained finger force, F_max
-    the limit and c the task's ``pressure_onset``, clip((F/F_max − c)/(1 − c), 0, 1), zero up to the onset and the
-    full weight at the limit. Success forbids only F > F_max; this warns before it, so that a policy learns the
-    margin and not the edge."""
+    pressure: float = 1.0
+    """Penalty for pressing near or above the specimen's fragility limit: with F the largest finger force of the
+    control interval (its 50 ms mean, not the sustained force), F_max the limit and c the task's
+    ``pressure_onset``, clip((F/F_max − c)/(1 − c), 0, 2)/2: zero up to the onset, half the weight at the limit,
+    the full weight from (2 − c) times it. Success forbids only a sustained F > F_max; this warns before it, so
+    that a policy learns the margin and not the edge. It reads the interval's force, which the harm rule's filter
+    smooths, and keeps growing past the limit, because a policy otherwise learns to squeeze in pulses the filter
+    hides: a penalty that is flat above the limit gives no reason to squeeze at 1.2 rather than 2 times it."""
     effort: float = 0.05
     """Penalty mean(action²)."""
     harm: float = 20.0
@@ -154,7 +157,7 @@ class GraspTask:
     it and ends the episode as a failure. The limit is observed: a gripper is told what it is sent to take."""
     pressure_onset: float = 0.7
     """Fraction of the fragility limit (dimensionless, in [0, 1)) above which the reward's pressure penalty
-    grows, reaching its full weight at the limit."""
+    grows, reaching half its weight at the limit and its full weight at (2 − onset) times it."""
     sustained_force_time: float = 0.2
     """Time constant [s] of a finger's sustained force: its force, averaged over a control interval, through a
     first-order low-pass filter. The fragility limit bounds it, and a finger touches while it is at least
@@ -547,14 +550,14 @@ class GraspBatch:
         (``grasped``), the object's distance from the grasp point [m] and speed [m/s], the harm done in this step
         and whether it ended a successful episode."""
         task, weights = self.task, self.task.reward
-        load = self.sustained_force.max(axis=1) / self.fragile_force
+        load = self.finger_force.max(axis=1) / self.fragile_force
         return {
             "reach": weights.reach * (1.0 - np.tanh(self.finger_gap / task.reach_distance)).mean(axis=1),
             "contact": weights.contact * self.touching.mean(axis=1),
             "hold": weights.hold * grasped * (1.0 - np.tanh(distance / task.hold_distance)),
             "rest": weights.rest * grasped * (1.0 - np.tanh(speed / task.rest_speed)),
-            "pressure": -weights.pressure * np.clip((load - task.pressure_onset) / (1.0 - task.pressure_onset), 0.0,
-                                                    1.0),
+            "pressure": -weights.pressure / 2 * np.clip((load - task.pressure_onset) / (1.0 - task.pressure_onset),
+                                                        0.0, 2.0),
             "effort": -weights.effort * np.mean(action**2, axis=1),
             "harm": -weights.harm * harm,
             "success": weights.success * succeeded,

@@ -479,26 +479,49 @@ def test_pressing_above_the_fragility_limit_harms_and_ends_the_episode():
     assert sustained.max() > 0.05
 
 
+def pressure_term(task: GraspTask, load: float) -> float:
+    """The pressure term written out: −weight/2 · clip((load − c)/(1 − c), 0, 2)."""
+    onset = task.pressure_onset
+    return -task.reward.pressure / 2 * min(max((load - onset) / (1.0 - onset), 0.0), 2.0)
+
+
 @pytest.mark.parametrize("onset", [0.0, 0.1, 0.7])
 def test_the_pressure_penalty_grows_from_its_onset_to_the_limit(onset):
-    """The pressure term is −weight · clip((F/F_max − c)/(1 − c), 0, 1), F the largest sustained finger force, at
-    every step of a reactive grasp, which pays it only for onsets below its grip's load."""
+    """The pressure term is −weight/2 · clip((F/F_max − c)/(1 − c), 0, 2), F the largest finger force of the
+    control interval, at every step of a reactive grasp, which pays it only for onsets below its grip's load."""
     env = SoftGripperUnderwaterEnv(model="planar", pressure_onset=onset)
     policy = ReactivePolicy(env.task)
     obs, _ = env.reset(seed=SUCCESS_SEED)
     terms, loads = [], []
     for _ in range(60):
         obs, _, terminated, truncated, info = env.step(policy(obs))
-        load = env._batch.sustained_force[0].max() / info["fragile_force_N"]
-        expected = -env.task.reward.pressure * min(max((load - onset) / (1.0 - onset), 0.0), 1.0)
-        assert info["reward_terms"]["pressure"] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+        load = info["finger_forces_N"].max() / info["fragile_force_N"]
+        assert info["reward_terms"]["pressure"] == pytest.approx(pressure_term(env.task, load), rel=1e-12,
+                                                                 abs=1e-15)
         terms.append(info["reward_terms"]["pressure"])
         loads.append(load)
         assert not terminated
-    assert 0.05 < max(loads) < 0.7  # a grip, well below the limit
+    assert 0.05 < max(loads) < 1.0  # a grip below the limit
     assert (min(terms) < 0.0) == (onset < max(loads))
     if onset == 0.0:
-        assert min(terms) == pytest.approx(-env.task.reward.pressure * max(loads))
+        assert min(terms) == pytest.approx(-env.task.reward.pressure / 2 * max(loads))
+
+
+def test_the_pressure_penalty_keeps_growing_past_the_limit():
+    """Closing at full rate squeezes the specimen: the interval's force passes the fragility limit before the
+    harm rule's filtered force does, and the penalty there exceeds half its weight, up to the whole weight."""
+    env = SoftGripperUnderwaterEnv(model="planar")
+    obs, _ = env.reset(seed=SUCCESS_SEED)
+    loads, terms = [], []
+    terminated = truncated = False
+    while not (terminated or truncated):
+        obs, _, terminated, truncated, info = env.step(np.full(3, -1.0, dtype=np.float32))
+        loads.append(info["finger_forces_N"].max() / info["fragile_force_N"])
+        terms.append(info["reward_terms"]["pressure"])
+        assert terms[-1] == pytest.approx(pressure_term(env.task, loads[-1]), rel=1e-12, abs=1e-15)
+    beyond = [term for load, term in zip(loads, terms, strict=True) if load > 1.0 + 1e-9]
+    assert beyond and all(term < -env.task.reward.pressure / 2 for term in beyond)
+    assert min(terms) >= -env.task.reward.pressure
 
 
 def test_object_swept_away_by_the_current_terminates_the_episode():
