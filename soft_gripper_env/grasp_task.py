@@ -114,7 +114,8 @@ class GraspTask:
     controller closing at 0.2 1/s loses the specimen on 21 of 96 tuning seeds, at 0.15 1/s on 36, at 0.3 1/s on 2);
     a faster one only lets a policy meet the specimen harder (one control interval past the touch at 0.5 1/s adds
     Δκ̄ = 0.025, about 5 N at a grip's 0.2 N per 0.001). PPO trained with 0.5 1/s peaked at a mean 4.2 N, with 0.3
-    1/s at 3.6 N and 6 points more success (docs/environment.md)."""
+    1/s at 3.6 N and 6 points more success, and at 3.3 N with the pressure warning on the interval's force
+    (docs/environment.md)."""
     action_exponent: float = 3.0
     """An action a in [−1, 1] sets the rate max_curvature_rate·sign(a)·|a|^p, p this exponent (dimensionless,
     ≥ 1): a grip's force follows κ̄ steeply (a κ̄ change of 0.001 presses about 0.2 N harder), so holding a fragile
