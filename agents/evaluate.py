@@ -64,19 +64,21 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
     batch of observations); ``settings`` are :class:`~soft_gripper_env.grasp_task.GraspTask` fields. Returns the
     success rate, mean and standard deviation of the return, the mean episode length, the mean over episodes of
     the peak finger force [N] (the largest sum of one finger's normal forces, averaged over a control interval),
-    how many episodes ended each way (:func:`episode_ending`), the wall time [s], and per episode: success,
-    return, peak force, ending and the object's final offset from the grasp point [m]."""
+    the mean peak load (that peak over the specimen's fragility limit, dimensionless) and the fraction of episodes
+    whose peak passed the limit (harm needs the sustained force to pass it; a brief squeeze does not), how many
+    episodes ended each way (:func:`episode_ending`), the wall time [s], and per episode: success, return, peak
+    force, peak load, ending and the object's final offset from the grasp point [m]."""
     num_envs = max(1, min(num_envs, episodes))
     venv = SoftGripperUnderwaterVectorEnv(num_envs, **settings)
     task = venv.task
     offset_part = observation_slices(task)["object_offset"]
-    outcomes: list[tuple[bool, float, int, float, str, list[float]]] = []
+    outcomes: list[tuple[bool, float, int, float, float, str, list[float]]] = []
     start = time.perf_counter()
     with tqdm(total=episodes, desc="episodes", unit="episode", disable=not progress) as bar:
         for first in range(seed, seed + episodes, num_envs):
             count = min(num_envs, seed + episodes - first)
             observations, _ = venv.reset(seed=[first + k for k in range(num_envs)])
-            returns, peaks = np.zeros(num_envs), np.zeros(num_envs)
+            returns, peaks, loads = np.zeros(num_envs), np.zeros(num_envs), np.zeros(num_envs)
             lengths = np.zeros(num_envs, dtype=np.int64)
             running = np.arange(num_envs) < count
             ended: dict[int, tuple] = {}
@@ -84,12 +86,15 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
                 observations, reward, terminated, truncated, info = venv.step(policy(observations))
                 returns[running] += reward[running]
                 lengths[running] += 1
-                peaks[running] = np.maximum(peaks[running], info["finger_forces_N"][running].max(axis=1))
+                force = info["finger_forces_N"].max(axis=1)
+                peaks[running] = np.maximum(peaks[running], force[running])
+                loads[running] = np.maximum(loads[running], (force / info["fragile_force_N"])[running])
                 for k in np.nonzero(running & (terminated | truncated))[0]:
                     single = {key: info[key][k] for key in ("is_success", "harmed", "solver_failure",
                                                             "finger_forces_N")}
                     offset = observations[k][offset_part]
                     ended[k] = (bool(single["is_success"]), float(returns[k]), int(lengths[k]), float(peaks[k]),
+                                float(loads[k]),
                                 episode_ending(task, observations[k], bool(terminated[k]), single),
                                 [float(x) for x in offset])
                     running[k] = False
@@ -97,12 +102,15 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
             bar.update(count)
     seconds = time.perf_counter() - start
     venv.close()
-    successes, returns, lengths, peaks, endings, offsets = (list(column) for column in zip(*outcomes, strict=True))
+    successes, returns, lengths, peaks, loads, endings, offsets = (list(column)
+                                                                   for column in zip(*outcomes, strict=True))
     return {"episodes": episodes, "first_seed": seed, "success_rate": float(np.mean(successes)),
             "mean_return": float(np.mean(returns)), "std_return": float(np.std(returns)),
             "mean_length": float(np.mean(lengths)), "mean_peak_contact_force_N": float(np.mean(peaks)),
+            "mean_peak_load": float(np.mean(loads)), "fraction_peak_above_limit": float(np.mean(np.array(loads) > 1.0)),
             "endings": {name: endings.count(name) for name in ENDINGS}, "seconds": seconds,
-            "successes": successes, "returns": returns, "peak_contact_forces_N": peaks, "episode_endings": endings,
+            "successes": successes, "returns": returns, "peak_contact_forces_N": peaks, "peak_loads": loads,
+            "episode_endings": endings,
             "final_object_offsets": offsets}
 
 
@@ -207,11 +215,12 @@ def main(argv: list[str] | None = None) -> dict:
     result = evaluate(policy, args.episodes, args.seed, num_envs=args.num_envs, model=args.model,
                       observation=observation)
     result.update(policy=args.policy, model=args.model, observation=observation)
-    print("| policy | model | episodes | success | mean return | mean peak finger force [N] |\n"
-          "|---|---|---|---|---|---|\n"
+    print("| policy | model | episodes | success | mean return | mean peak finger force [N] | mean peak / limit | "
+          "peak above the limit |\n|---|---|---|---|---|---|---|---|\n"
           f"| {args.policy} | {args.model} | {args.episodes} (seeds {args.seed}–{args.seed + args.episodes - 1}) | "
           f"{result['success_rate']:.3f} | {result['mean_return']:.2f} ± {result['std_return']:.2f} | "
-          f"{result['mean_peak_contact_force_N']:.2f} |")
+          f"{result['mean_peak_contact_force_N']:.2f} | {result['mean_peak_load']:.2f} | "
+          f"{result['fraction_peak_above_limit']:.0%} of episodes |")
     print("endings: " + ", ".join(f"{name} {count}" for name, count in result["endings"].items() if count))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -12,7 +12,7 @@ import pytest
 
 import soft_gripper_env
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
-from agents.scripted import RampPolicy, RandomPolicy
+from agents.scripted import ConstantPolicy, RampPolicy, RandomPolicy
 from soft_gripper_env.env import observation_bounds, observation_slices
 from soft_gripper_env.grasp_task import GraspTask
 
@@ -156,6 +156,31 @@ def test_evaluate_runs_seeds_as_single_envs_do():
             obs, reward, *_ = env.step(RampPolicy()(obs))
             total += reward
         assert total == pytest.approx(expected, abs=1e-9)
+
+
+def test_evaluate_reports_each_episodes_peak_force_and_its_ratio_to_the_specimens_limit():
+    """The peak finger force and peak load of each episode are those a single env's infos give (the fastest constant
+    closing presses past the limit of some specimens within 0.6 s and not of others)."""
+    from agents.evaluate import evaluate
+
+    result = evaluate(ConstantPolicy(action=-1.0), episodes=3, seed=70, progress=False, num_envs=3,
+                      max_episode_steps=12)
+    env = gym.make(soft_gripper_env.ENV_ID, max_episode_steps=12)
+    loads = []
+    for k in range(3):
+        obs, info = env.reset(seed=70 + k)
+        peak, load, done = 0.0, 0.0, False
+        while not done:
+            obs, _, terminated, truncated, info = env.step(ConstantPolicy(action=-1.0)(obs))
+            done = terminated or truncated
+            peak = max(peak, float(np.max(info["finger_forces_N"])))
+            load = max(load, float(np.max(info["finger_forces_N"]) / info["fragile_force_N"]))
+        assert result["peak_contact_forces_N"][k] == pytest.approx(peak, rel=1e-12)
+        assert result["peak_loads"][k] == pytest.approx(load, rel=1e-12)
+        loads.append(load)
+    assert result["mean_peak_load"] == pytest.approx(np.mean(loads))
+    assert result["fraction_peak_above_limit"] == pytest.approx(np.mean(np.array(loads) > 1.0))
+    assert 0.0 < result["fraction_peak_above_limit"] < 1.0
 
 
 def test_episode_ending_names_the_first_failed_condition():
