@@ -16,7 +16,7 @@ import argparse
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from agents.scripted import RampPolicy, RandomPolicy, ReactivePolicy
 from soft_gripper_env.env import SoftGripperUnderwaterVectorEnv, observation_bounds, observation_slices
-from soft_gripper_env.grasp_task import GraspTask
+from soft_gripper_env.grasp_task import GraspTask, RewardWeights
 
 PRETRAINED = Path(__file__).resolve().parent / "pretrained"
 """The shipped PPO policy: its model and VecNormalize statistics."""
@@ -62,29 +62,33 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
              num_envs: int = 16, **settings) -> dict:
     """Runs ``episodes`` episodes with seeds seed, seed + 1, ..., ``num_envs`` at a time (``policy`` acts on a
     batch of observations); ``settings`` are :class:`~soft_gripper_env.grasp_task.GraspTask` fields. Returns the
-    success rate, mean and standard deviation of the return, the mean episode length, the mean over episodes of
-    the peak finger force [N] (the largest sum of one finger's normal forces, averaged over a control interval),
-    the mean peak load (that peak over the specimen's fragility limit, dimensionless) and the fraction of episodes
-    whose peak passed the limit (harm needs the sustained force to pass it; a brief squeeze does not), how many
-    episodes ended each way (:func:`episode_ending`), the wall time [s], and per episode: success, return, peak
-    force, peak load, ending and the object's final offset from the grasp point [m]."""
+    success rate, mean and standard deviation of the return, the mean over episodes of each reward term's sum
+    (what the return is made of), the mean episode length, the mean over episodes of the peak finger force [N]
+    (the largest sum of one finger's normal forces, averaged over a control interval), the mean peak load (that
+    peak over the specimen's fragility limit, dimensionless) and the fraction of episodes whose peak passed the
+    limit (harm needs the sustained force to pass it; a brief squeeze does not), how many episodes ended each way
+    (:func:`episode_ending`), the wall time [s], and per episode: success, return, peak force, peak load, ending and
+    the object's final offset from the grasp point [m]."""
     num_envs = max(1, min(num_envs, episodes))
     venv = SoftGripperUnderwaterVectorEnv(num_envs, **settings)
     task = venv.task
     offset_part = observation_slices(task)["object_offset"]
-    outcomes: list[tuple[bool, float, int, float, float, str, list[float]]] = []
+    term_names = [term.name for term in fields(RewardWeights)]
+    records: list[dict] = []
     start = time.perf_counter()
     with tqdm(total=episodes, desc="episodes", unit="episode", disable=not progress) as bar:
         for first in range(seed, seed + episodes, num_envs):
             count = min(num_envs, seed + episodes - first)
             observations, _ = venv.reset(seed=[first + k for k in range(num_envs)])
             returns, peaks, loads = np.zeros(num_envs), np.zeros(num_envs), np.zeros(num_envs)
+            term_sums = np.zeros((len(term_names), num_envs))
             lengths = np.zeros(num_envs, dtype=np.int64)
             running = np.arange(num_envs) < count
-            ended: dict[int, tuple] = {}
+            ended: dict[int, dict] = {}
             while running.any():
                 observations, reward, terminated, truncated, info = venv.step(policy(observations))
                 returns[running] += reward[running]
+                term_sums[:, running] += np.array([info["reward_terms"][name] for name in term_names])[:, running]
                 lengths[running] += 1
                 force = info["finger_forces_N"].max(axis=1)
                 peaks[running] = np.maximum(peaks[running], force[running])
@@ -92,26 +96,28 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
                 for k in np.nonzero(running & (terminated | truncated))[0]:
                     single = {key: info[key][k] for key in ("is_success", "harmed", "solver_failure",
                                                             "finger_forces_N")}
-                    offset = observations[k][offset_part]
-                    ended[k] = (bool(single["is_success"]), float(returns[k]), int(lengths[k]), float(peaks[k]),
-                                float(loads[k]),
-                                episode_ending(task, observations[k], bool(terminated[k]), single),
-                                [float(x) for x in offset])
+                    ended[k] = {"success": bool(single["is_success"]), "return": float(returns[k]),
+                                "length": int(lengths[k]), "peak": float(peaks[k]), "load": float(loads[k]),
+                                "terms": term_sums[:, k].copy(),
+                                "ending": episode_ending(task, observations[k], bool(terminated[k]), single),
+                                "offset": [float(x) for x in observations[k][offset_part]]}
                     running[k] = False
-            outcomes += [ended[k] for k in range(count)]
+            records += [ended[k] for k in range(count)]
             bar.update(count)
     seconds = time.perf_counter() - start
     venv.close()
-    successes, returns, lengths, peaks, loads, endings, offsets = (list(column)
-                                                                   for column in zip(*outcomes, strict=True))
-    return {"episodes": episodes, "first_seed": seed, "success_rate": float(np.mean(successes)),
-            "mean_return": float(np.mean(returns)), "std_return": float(np.std(returns)),
-            "mean_length": float(np.mean(lengths)), "mean_peak_contact_force_N": float(np.mean(peaks)),
-            "mean_peak_load": float(np.mean(loads)), "fraction_peak_above_limit": float(np.mean(np.array(loads) > 1.0)),
-            "endings": {name: endings.count(name) for name in ENDINGS}, "seconds": seconds,
-            "successes": successes, "returns": returns, "peak_contact_forces_N": peaks, "peak_loads": loads,
-            "episode_endings": endings,
-            "final_object_offsets": offsets}
+    column = {key: [record[key] for record in records] for key in records[0]}
+    mean_terms = np.mean(column["terms"], axis=0)
+    return {"episodes": episodes, "first_seed": seed, "success_rate": float(np.mean(column["success"])),
+            "mean_return": float(np.mean(column["return"])), "std_return": float(np.std(column["return"])),
+            "mean_reward_terms": {name: float(value) for name, value in zip(term_names, mean_terms, strict=True)},
+            "mean_length": float(np.mean(column["length"])),
+            "mean_peak_contact_force_N": float(np.mean(column["peak"])),
+            "mean_peak_load": float(np.mean(column["load"])),
+            "fraction_peak_above_limit": float(np.mean(np.array(column["load"]) > 1.0)),
+            "endings": {name: column["ending"].count(name) for name in ENDINGS}, "seconds": seconds,
+            "successes": column["success"], "returns": column["return"], "peak_contact_forces_N": column["peak"],
+            "peak_loads": column["load"], "episode_endings": column["ending"], "final_object_offsets": column["offset"]}
 
 
 def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:

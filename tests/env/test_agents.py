@@ -146,6 +146,8 @@ def test_evaluate_runs_seeds_as_single_envs_do():
     result = evaluate(RampPolicy(), episodes=3, seed=1000, progress=False, num_envs=2, max_episode_steps=5)
     assert result["episodes"] == 3 and result["mean_length"] == 5
     assert result["mean_return"] == pytest.approx(np.mean(result["returns"]))
+    assert sum(result["mean_reward_terms"].values()) == pytest.approx(result["mean_return"], abs=1e-9)
+    assert result["mean_reward_terms"]["reach"] > 0 and result["mean_reward_terms"]["success"] == 0
     assert result["episode_endings"] == ["not_all_touching"] * 3  # after 0.25 s the fingers have not closed
     assert set(result["endings"]) == set(ENDINGS) and sum(result["endings"].values()) == 3
     env = gym.make(soft_gripper_env.ENV_ID, max_episode_steps=5)
