@@ -165,15 +165,15 @@ def test_evaluate_reports_each_episodes_peak_force_and_its_ratio_to_the_specimen
     closing presses past the limit of some specimens within 0.6 s and not of others)."""
     from agents.evaluate import evaluate
 
-    result = evaluate(ConstantPolicy(action=-1.0), episodes=3, seed=70, progress=False, num_envs=3,
-                      max_episode_steps=12)
+    closing = ConstantPolicy(action=-1.0)
+    result = evaluate(closing, episodes=3, seed=70, progress=False, num_envs=3, max_episode_steps=12)
     env = gym.make(soft_gripper_env.ENV_ID, max_episode_steps=12)
     loads = []
     for k in range(3):
         obs, info = env.reset(seed=70 + k)
         peak, load, done = 0.0, 0.0, False
         while not done:
-            obs, _, terminated, truncated, info = env.step(ConstantPolicy(action=-1.0)(obs))
+            obs, _, terminated, truncated, info = env.step(closing(obs))
             done = terminated or truncated
             peak = max(peak, float(np.max(info["finger_forces_N"])))
             load = max(load, float(np.max(info["finger_forces_N"]) / info["fragile_force_N"]))
