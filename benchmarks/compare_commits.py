@@ -13,10 +13,12 @@ base and this tree's value and the speed ratio (this tree's speed over the base'
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 from tqdm import tqdm
@@ -24,13 +26,18 @@ from tqdm import tqdm
 ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS = ("core_speed", "env_speed")
 
-# A child process that imports the package from TREE alone: the editable install's finder would otherwise serve
-# this checkout's package to every tree.
-_RUNNER = """
-import runpy, sys
-tree, name = sys.argv[1], sys.argv[2]
+ISOLATE = """
+import sys
+tree = sys.argv[1]
 sys.meta_path[:] = [f for f in sys.meta_path if '__editable__' not in (getattr(f, '__module__', '') or '')
                     and '__editable__' not in type(f).__module__ and '__editable__' not in getattr(f, '__name__', '')]
+"""
+"""The start of a child process that imports the package from the tree named by its first argument alone: the
+editable install's finder would otherwise serve this checkout's package to every tree."""
+
+_RUNNER = ISOLATE + """
+import runpy
+name = sys.argv[2]
 script = tree + '/benchmarks/' + name + '.py'
 sys.path[:0] = [tree, tree + '/benchmarks']
 sys.argv = [script] + sys.argv[3:]
@@ -39,6 +46,26 @@ if __import__('os').path.exists(tree + '/benchmarks/__init__.py'):
 else:
     runpy.run_path(script, run_name='__main__')
 """
+
+
+def resolve(revision: str) -> str | None:
+    """The full hash of ``revision`` in this repository, or None if it names no commit."""
+    done = subprocess.run(["git", "rev-parse", "--verify", "--quiet", f"{revision}^{{commit}}"], cwd=ROOT,
+                          capture_output=True, text=True)
+    return done.stdout.strip() if done.returncode == 0 else None
+
+
+@contextlib.contextmanager
+def worktree(commit: str) -> Iterator[Path]:
+    """``commit`` checked out into a temporary git worktree, removed afterwards."""
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "base"
+        subprocess.run(["git", "worktree", "add", "--detach", str(tree), commit], cwd=ROOT, check=True,
+                       capture_output=True)
+        try:
+            yield tree
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, capture_output=True)
 
 
 def run_benchmark(tree: Path, name: str, repeats: int, workdir: Path) -> dict[str, float]:
@@ -88,28 +115,21 @@ def main(argv: list[str] | None = None) -> dict:
     args = parser.parse_args(argv)
     if args.rounds < 1 or args.repeats < 1:
         parser.error("--rounds and --repeats must be at least 1")
-    base_commit = subprocess.run(["git", "rev-parse", args.base], cwd=ROOT, capture_output=True, text=True)
-    if base_commit.returncode != 0:
+    base_commit = resolve(args.base)
+    if base_commit is None:
         parser.error(f"--base {args.base!r} is not a commit of this repository")
-    base_commit = base_commit.stdout.strip()
-    head_commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    head_commit = resolve("HEAD")
 
-    with tempfile.TemporaryDirectory() as tmp:
+    with worktree(base_commit) as base_tree, tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)
-        base_tree = workdir / "base"
-        subprocess.run(["git", "worktree", "add", "--detach", str(base_tree), base_commit], cwd=ROOT, check=True,
-                       capture_output=True)
-        try:
-            trees = {"base": base_tree, "this": ROOT}
-            best: dict[str, dict[str, float]] = {"base": {}, "this": {}}
-            runs = [(r, name, side) for r in range(args.rounds) for name in args.benchmarks
-                    for side in (("base", "this") if r % 2 == 0 else ("this", "base"))]
-            for _, name, side in tqdm(runs, desc="benchmark runs", unit="run"):
-                for key, value in run_benchmark(trees[side], name, args.repeats, workdir).items():
-                    pick = max if higher_is_faster(key) else min
-                    best[side][key] = pick(best[side].get(key, value), value)
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(base_tree)], cwd=ROOT, capture_output=True)
+        trees = {"base": base_tree, "this": ROOT}
+        best: dict[str, dict[str, float]] = {"base": {}, "this": {}}
+        runs = [(r, name, side) for r in range(args.rounds) for name in args.benchmarks
+                for side in (("base", "this") if r % 2 == 0 else ("this", "base"))]
+        for _, name, side in tqdm(runs, desc="benchmark runs", unit="run"):
+            for key, value in run_benchmark(trees[side], name, args.repeats, workdir).items():
+                pick = max if higher_is_faster(key) else min
+                best[side][key] = pick(best[side].get(key, value), value)
 
     rows = []
     print(f"\n{'measurement':<48}{'base':>12}{'this tree':>12}{'speed ratio':>13}")

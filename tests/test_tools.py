@@ -1,5 +1,6 @@
-"""The refactoring guard (scripts/golden_outputs.py), the commit comparison (benchmarks/compare_commits.py) and the
-grasp-outcome study's scoring (benchmarks/speed_vs_error.py)."""
+"""The refactoring guard (scripts/golden_outputs.py), the commit comparison (benchmarks/compare_commits.py), the
+reference-count benchmark's reading of gdb (benchmarks/refcounts.py) and the grasp-outcome study's scoring
+(benchmarks/speed_vs_error.py)."""
 
 import subprocess
 import sys
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 
 from benchmarks.compare_commits import higher_is_faster, measurements
+from benchmarks.refcounts import hits
 from benchmarks.speed_vs_error import (
     OUTCOME_DEFAULT,
     OUTCOME_REFERENCE,
@@ -66,6 +68,25 @@ def test_compare_commits_refuses_an_unknown_base():
                          capture_output=True, text=True, timeout=120)
     assert out.returncode != 0
     assert "--base 'no-such-commit' is not a commit" in out.stderr
+
+
+def test_refcounts_reads_each_breakpoints_hits_from_gdb_and_refuses_output_without_both():
+    listing = ("Num     Type           Disp Enb Address            What\n"
+               "1       breakpoint     keep y   0x00007ffff7361050 <NRT_incref>\n"
+               "\tbreakpoint already hit 78837 times\n\tignore next 99921163 hits\n"
+               "2       breakpoint     keep y   0x00007ffff7361060 <NRT_decref>\n"
+               "\tbreakpoint already hit 1 time\n")
+    assert hits(listing) == (78837, 1)
+    with pytest.raises(RuntimeError, match="two breakpoints"):
+        hits(listing.split("2       breakpoint")[0])
+
+
+def test_compare_commits_refuses_a_revision_that_is_not_a_commit():
+    tree = subprocess.run(["git", "rev-parse", "HEAD^{tree}"], cwd=ROOT, capture_output=True, text=True).stdout
+    out = subprocess.run([sys.executable, "-m", "benchmarks.compare_commits", "--base", tree.strip()], cwd=ROOT,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode != 0
+    assert "is not a commit" in out.stderr
 
 
 def test_grasp_outcome_summary_scores_settings_against_the_reference(tmp_path):
