@@ -144,7 +144,7 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
     return act
 
 
-ACTION_MAP = ("control_dt", "max_curvature_rate", "action_exponent", "curvature_range")
+ACTION_MAP = ("control_dt", "max_curvature_rate", "action_exponent", "curvature_range", "touching_closing_rate")
 """The task's settings that say what an action does: a policy trained with other values would act wrongly, not
 differently, so :func:`main` refuses it."""
 
@@ -153,8 +153,14 @@ def action_map_mismatch(trained_task: dict, task: GraspTask) -> str | None:
     """Where a policy's training task (its config.json's ``task``) maps actions otherwise than ``task``: a sentence
     naming each differing setting of :data:`ACTION_MAP` with both values, or None."""
     today = asdict(task)
+
+    def same(trained, value) -> bool:  # None (no bound) equals only None
+        if trained is None or value is None:
+            return trained is None and value is None
+        return bool(np.allclose(trained, value, rtol=1e-12, atol=0.0))
+
     differing = [f"{name} = {trained_task[name]!r} (today {today[name]!r})" for name in ACTION_MAP
-                 if name in trained_task and not np.allclose(trained_task[name], today[name], rtol=1e-12, atol=0.0)]
+                 if name in trained_task and not same(trained_task[name], today[name])]
     return ", ".join(differing) or None
 
 
@@ -196,6 +202,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--json", type=Path, help="write the results here")
     parser.add_argument("--model", choices=("planar", "3d"), default="3d", help="rod model (default 3d)")
     parser.add_argument("--num-envs", type=int, default=16, help="episodes run at a time (default 16)")
+    parser.add_argument("--touching-closing-rate", type=float, default=None, metavar="RATE",
+                        help="the fastest a touching finger closes [1/s] (GraspTask.touching_closing_rate; default: "
+                             "no bound); a trained policy must be run with the bound it was trained with")
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes = {args.episodes} must be at least 1")
@@ -203,7 +212,10 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--num-envs = {args.num_envs} must be at least 1")
     if args.policy not in ("random", "ramp", "reactive", "pretrained") and not Path(args.policy).is_dir():
         parser.error(f"--policy = {args.policy!r} is not random, ramp, reactive, pretrained or a folder")
-    task = GraspTask(model=args.model)
+    try:
+        task = GraspTask(model=args.model, touching_closing_rate=args.touching_closing_rate)
+    except ValueError as error:
+        parser.error(str(error).replace("GraspTask.touching_closing_rate", "--touching-closing-rate"))
     try:
         policy = make_policy(args.policy, task, args.seed)
     except FileNotFoundError as error:
@@ -217,9 +229,10 @@ def main(argv: list[str] | None = None) -> dict:
     mismatch = action_map_mismatch(getattr(policy, "trained_task", {}), task)
     if mismatch:
         parser.error(f"--policy {args.policy} was trained on a task whose actions act otherwise: {mismatch}; "
-                     f"evaluate it with the version of the package it was trained with")
+                     f"evaluate it with the settings (--touching-closing-rate) and the version of the package it "
+                     f"was trained with")
     result = evaluate(policy, args.episodes, args.seed, num_envs=args.num_envs, model=args.model,
-                      observation=observation)
+                      observation=observation, touching_closing_rate=args.touching_closing_rate)
     result.update(policy=args.policy, model=args.model, observation=observation)
     print("| policy | model | episodes | success | mean return | mean peak finger force [N] | mean peak / limit | "
           "peak above the limit |\n|---|---|---|---|---|---|---|---|\n"

@@ -128,6 +128,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--observation", choices=("full", "sensors"), default="sensors",
                         help="what the policy observes (GraspTask.observation; default sensors: the same in both rod "
                              "models, so the policy also runs in the other)")
+    parser.add_argument("--touching-closing-rate", type=float, default=None, metavar="RATE",
+                        help="the fastest a touching finger closes [1/s] (GraspTask.touching_closing_rate; default: "
+                             "no bound)")
     parser.add_argument("--eval-episodes", type=int, default=200, help="held-out episodes at the end (0: none)")
     parser.add_argument("--validate-every", type=int, default=50_000,
                         help="env steps between measures of the deterministic policy on validation seeds, the "
@@ -143,17 +146,22 @@ def main(argv: list[str] | None = None) -> dict:
             parser.error(f"--{name.replace('_', '-')} = {getattr(args, name)} must be at least 0")
     if args.num_threads > args.num_envs:
         parser.error(f"--num-threads = {args.num_threads} must be at most --num-envs = {args.num_envs}")
+    settings = {"model": args.model, "observation": args.observation,
+                "touching_closing_rate": args.touching_closing_rate}
+    try:
+        task = GraspTask(**settings)
+    except ValueError as error:
+        parser.error(str(error).replace("GraspTask.touching_closing_rate", "--touching-closing-rate"))
     args.out.mkdir(parents=True, exist_ok=True)
 
-    task = GraspTask(model=args.model, observation=args.observation)
     env = VecNormalize(VecMonitor(SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads,
-                                                       model=args.model, observation=args.observation),
+                                                       **settings),
                                   info_keywords=("is_success",)), gamma=PPO_SETTINGS["gamma"])
     model = PPO("MlpPolicy", env, batch_size=min(1024, PPO_SETTINGS["n_steps"] * args.num_envs), **PPO_SETTINGS,
                 policy_kwargs=POLICY_SETTINGS, seed=args.seed, verbose=0, device="cpu",
                 tensorboard_log=str(args.out / "tensorboard"))
-    progress = ProgressAndCurve(args.timesteps, args.validate_every, model=args.model, observation=args.observation,
-                                episodes=args.validation_episodes, num_threads=args.num_threads)
+    progress = ProgressAndCurve(args.timesteps, args.validate_every, episodes=args.validation_episodes,
+                                num_threads=args.num_threads, **settings)
     checkpoints = CheckpointCallback(save_freq=max(1, 100_000 // args.num_envs),
                                      save_path=str(args.out / "checkpoints"), save_vecnormalize=True)
     model.learn(args.timesteps, callback=[progress, checkpoints], tb_log_name=f"ppo_seed{args.seed}")
@@ -171,8 +179,7 @@ def main(argv: list[str] | None = None) -> dict:
     if args.eval_episodes:
         for name, policy in (("ppo", load_ppo(args.out)), ("ramp", RampPolicy(task)),
                              ("reactive", ReactivePolicy(task))):
-            result = evaluate(policy, args.eval_episodes, HELD_OUT_SEED, model=args.model,
-                              observation=args.observation)
+            result = evaluate(policy, args.eval_episodes, HELD_OUT_SEED, **settings)
             results[name] = {key: result[key] for key in ("success_rate", "mean_return", "mean_peak_contact_force_N",
                                                           "endings")}
             print(f"{name:>9}: success {result['success_rate']:.3f}, return {result['mean_return']:.1f}, "

@@ -275,6 +275,9 @@ def test_scripts_reject_bad_arguments(tmp_path):
     assert out.returncode == 2 and "--timesteps = 0 must be at least 1" in out.stderr
     out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path), "--num-envs", "2", "--num-threads", "3")
     assert out.returncode == 2 and "--num-threads = 3 must be at most --num-envs = 2" in out.stderr
+    out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "bound"), "--touching-closing-rate", "-1")
+    assert out.returncode == 2 and "--touching-closing-rate = -1.0 1/s is outside the allowed range" in out.stderr
+    assert not (tmp_path / "bound").exists()  # refused before anything is written
 
 
 def test_evaluate_refuses_a_policy_trained_on_another_action_map(tmp_path):
@@ -294,3 +297,33 @@ def test_evaluate_refuses_a_policy_trained_on_another_action_map(tmp_path):
     out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1")
     assert out.returncode == 2, out.stderr
     assert "max_curvature_rate = 0.5 (today 0.3)" in out.stderr and "curvature_range = [-0.25, 0.0]" in out.stderr
+
+
+def test_evaluate_runs_a_policy_only_with_the_touching_closing_bound_it_was_trained_with(tmp_path):
+    """A bound on a touching finger's closing rate is part of what an action does: a policy trained with one is
+    refused without it (and the shipped one, trained without, is refused with one); given the same bound it runs,
+    and a bound out of range is refused by name."""
+    import shutil
+
+    from agents.evaluate import action_map_mismatch
+
+    config = json.loads((ROOT / "agents" / "pretrained" / "config.json").read_text())
+    assert action_map_mismatch(config["task"], GraspTask(touching_closing_rate=0.04)) is None  # trained before it
+    config["task"]["touching_closing_rate"] = None
+    assert "touching_closing_rate = None (today 0.04)" in action_map_mismatch(
+        config["task"], GraspTask(touching_closing_rate=0.04))
+    config["task"]["touching_closing_rate"] = 0.04
+    assert action_map_mismatch(config["task"], GraspTask(touching_closing_rate=0.04)) is None
+    assert "touching_closing_rate = 0.04 (today None)" in action_map_mismatch(config["task"], GraspTask())
+
+    folder = tmp_path / "policy"
+    shutil.copytree(ROOT / "agents" / "pretrained", folder)
+    (folder / "config.json").write_text(json.dumps(config))
+    out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1")
+    assert out.returncode == 2 and "touching_closing_rate = 0.04 (today None)" in out.stderr, out.stderr
+    out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1", "--model", "planar",
+                     "--touching-closing-rate", "0.04")
+    assert out.returncode == 0, out.stderr
+    out = run_script("-m", "agents.evaluate", "--policy", "reactive", "--episodes", "1",
+                     "--touching-closing-rate", "0")
+    assert out.returncode == 2 and "--touching-closing-rate = 0.0 1/s is outside the allowed range" in out.stderr

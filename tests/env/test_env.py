@@ -428,6 +428,35 @@ def test_the_cubic_action_map_and_its_inverse():
     np.testing.assert_allclose(linear.curvature_rate(actions), 0.5 * actions)
 
 
+def test_a_touching_finger_closes_no_faster_than_the_bound_and_the_others_as_asked():
+    """With ``touching_closing_rate``, the fastest closing (−1) moves a finger that touches at the start of the
+    interval by the bound times the interval, and one that does not by the full rate; opening is not bounded."""
+    bound = 0.01
+    env = gym.make(ENV_ID, model="planar", touching_closing_rate=bound)
+    env.reset(seed=5000)
+    batch = env.unwrapped._batch
+    dt, full = batch.task.control_dt, batch.task.max_curvature_rate
+    seen = set()
+    for _ in range(40):
+        touching, before = batch.touching[0].copy(), batch.natural_curvature[0].copy()
+        action = np.full(3, -1.0) if len(seen) < 2 else np.array([1.0, -1.0, -1.0])
+        env.step(action.astype(np.float32))
+        change = batch.natural_curvature[0] - before
+        for f in range(3):
+            expected = full * dt if action[f] > 0 else -(bound if touching[f] else full) * dt
+            low, high = batch.task.curvature_range
+            expected = np.clip(before[f] + expected, low, high) - before[f]
+            assert change[f] == pytest.approx(expected, abs=1e-12), (f, touching[f], action[f])
+        seen |= {("touching" if touching[f] else "free", action[f] > 0) for f in range(3)}
+        if {("touching", False), ("free", False), ("touching", True)} <= seen:
+            break
+    assert {("touching", False), ("free", False), ("touching", True)} <= seen, seen
+    env.close()
+    with pytest.raises(ValueError, match=r"GraspTask\.touching_closing_rate = -0\.1 1/s is outside the allowed "
+                                         r"range \(0, 100\)"):
+        GraspTask(touching_closing_rate=-0.1)
+
+
 def test_reactive_grasp_succeeds_once_held_through_the_gust():
     """On a seed the reactive controller takes, is_success turns on only after the gust has passed and the hold
     has lasted 1 s, and the episode ends truncated at 4 s with the success bonus."""
