@@ -233,7 +233,8 @@ def main(argv: list[str] | None = None) -> dict:
                      f"was trained with")
     result = evaluate(policy, args.episodes, args.seed, num_envs=args.num_envs, model=args.model,
                       observation=observation, touching_closing_rate=args.touching_closing_rate)
-    result.update(policy=args.policy, model=args.model, observation=observation)
+    result.update(policy=args.policy, model=args.model, observation=observation,
+                  touching_closing_rate=args.touching_closing_rate)
     print("| policy | model | episodes | success | mean return | mean peak finger force [N] | mean peak / limit | "
           "peak above the limit |\n|---|---|---|---|---|---|---|---|\n"
           f"| {args.policy} | {args.model} | {args.episodes} (seeds {args.seed}–{args.seed + args.episodes - 1}) | "
@@ -241,6 +242,8 @@ def main(argv: list[str] | None = None) -> dict:
           f"{result['mean_peak_contact_force_N']:.2f} | {result['mean_peak_load']:.2f} | "
           f"{result['fraction_peak_above_limit']:.0%} of episodes |")
     print("endings: " + ", ".join(f"{name} {count}" for name, count in result["endings"].items() if count))
+    if args.touching_closing_rate is not None:
+        print(f"a touching finger closed at most at {args.touching_closing_rate:g} 1/s (--touching-closing-rate)")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))

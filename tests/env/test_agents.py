@@ -322,8 +322,10 @@ def test_evaluate_runs_a_policy_only_with_the_touching_closing_bound_it_was_trai
     out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1")
     assert out.returncode == 2 and "touching_closing_rate = 0.04 (today None)" in out.stderr, out.stderr
     out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1", "--model", "planar",
-                     "--touching-closing-rate", "0.04")
+                     "--touching-closing-rate", "0.04", "--json", str(tmp_path / "result.json"))
     assert out.returncode == 0, out.stderr
+    assert json.loads((tmp_path / "result.json").read_text())["touching_closing_rate"] == 0.04
+    assert "closed at most at 0.04 1/s" in out.stdout
     out = run_script("-m", "agents.evaluate", "--policy", "reactive", "--episodes", "1",
                      "--touching-closing-rate", "0")
     assert out.returncode == 2 and "--touching-closing-rate = 0.0 1/s is outside the allowed range" in out.stderr
