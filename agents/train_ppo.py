@@ -2,6 +2,7 @@
 
     python -m agents.train_ppo --out DIR [--timesteps 600000] [--seed 0] [--num-envs 32] [--num-threads 2]
         [--model planar] [--observation sensors] [--validate-every 50000] [--eval-episodes 200]
+        [--touching-closing-rate RATE] [--final-pressure-weight W [--pressure-ramp START END]]
 
 By default PPO trains in the planar rod model on the sensors' observation (``GraspTask.observation``): a planar
 step costs about a third of a 3-D one, so the 30 minutes buy three times the experience, and the sensors'
@@ -21,7 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ from agents.evaluate import evaluate, load_ppo, ppo_policy
 from agents.learning_curves import load_run, plot_learning_curves
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
 from agents.scripted import RampPolicy, ReactivePolicy
-from soft_gripper_env.grasp_task import GraspTask
+from soft_gripper_env.grasp_task import GraspTask, RewardWeights
 
 HELD_OUT_SEED = 1_000_000
 """First seed of the held-out evaluation: training episodes are drawn from the generators of seeds seed … seed +
@@ -53,6 +54,36 @@ policy's holds (the reactive controller with per-step noise of std 0.2 keeps 50 
 5 %), but the cubic action map turns a narrow start into no motion at all: with std 0.2, PPO's return stayed at
 the passive policy's (about 7) for 200,000 steps, while with std 1 it rose to 75 within 300,000 (seed 0, 3-D;
 docs/environment.md)."""
+
+
+def ramped(steps: int, start: int, end: int, initial: float, final: float) -> float:
+    """``initial`` until ``start`` env steps, then linearly to ``final`` at ``end``, and ``final`` after."""
+    if steps >= end:
+        return final
+    return initial + (final - initial) * max(0.0, (steps - start) / (end - start))
+
+
+class PressureWarningRamp(BaseCallback):
+    """Grows the reward's pressure warning (``RewardWeights.pressure``) from its weight in ``weights`` to
+    ``final`` between ``start`` and ``end`` env steps, set at the start of every rollout (so one rollout's rewards
+    share one weight) and logged to TensorBoard as ``train/pressure_weight``. A heavy warning from the start charges
+    the first clumsy grasps more than they earn, and PPO may never learn to close; begun late, it charges the
+    squeeze of a policy that already grasps."""
+
+    def __init__(self, weights: RewardWeights, final: float, start: int, end: int) -> None:
+        super().__init__()
+        self.weights, self.final, self.start, self.end = weights, final, start, end
+
+    def weight(self, steps: int) -> float:
+        return ramped(steps, self.start, self.end, self.weights.pressure, self.final)
+
+    def _on_rollout_start(self) -> None:
+        weight = self.weight(self.num_timesteps)
+        self.training_env.env_method("set_reward_weights", replace(self.weights, pressure=weight), indices=[0])
+        self.logger.record("train/pressure_weight", weight)
+
+    def _on_step(self) -> bool:
+        return True
 
 
 class ProgressAndCurve(BaseCallback):
@@ -131,6 +162,12 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--touching-closing-rate", type=float, default=None, metavar="RATE",
                         help="the fastest a touching finger closes [1/s] (GraspTask.touching_closing_rate; default: "
                              "no bound)")
+    parser.add_argument("--final-pressure-weight", type=float, default=None, metavar="W",
+                        help="grow the reward's pressure warning (RewardWeights.pressure, 1 at the start) to W over "
+                             "--pressure-ramp (default: constant)")
+    parser.add_argument("--pressure-ramp", type=int, nargs=2, default=(200_000, 400_000), metavar=("START", "END"),
+                        help="env steps over which the warning grows to --final-pressure-weight (default 200000 "
+                             "400000)")
     parser.add_argument("--eval-episodes", type=int, default=200, help="held-out episodes at the end (0: none)")
     parser.add_argument("--validate-every", type=int, default=50_000,
                         help="env steps between measures of the deterministic policy on validation seeds, the "
@@ -146,6 +183,12 @@ def main(argv: list[str] | None = None) -> dict:
             parser.error(f"--{name.replace('_', '-')} = {getattr(args, name)} must be at least 0")
     if args.num_threads > args.num_envs:
         parser.error(f"--num-threads = {args.num_threads} must be at most --num-envs = {args.num_envs}")
+    if args.final_pressure_weight is not None:
+        if not 0.0 <= args.final_pressure_weight <= 1e6:
+            parser.error(f"--final-pressure-weight = {args.final_pressure_weight} is outside [0, 1e6]")
+        start, end = args.pressure_ramp
+        if not 0 <= start <= end:
+            parser.error(f"--pressure-ramp = {start} {end} must satisfy 0 <= START <= END")
     settings = {"model": args.model, "observation": args.observation,
                 "touching_closing_rate": args.touching_closing_rate}
     try:
@@ -162,16 +205,23 @@ def main(argv: list[str] | None = None) -> dict:
                 tensorboard_log=str(args.out / "tensorboard"))
     progress = ProgressAndCurve(args.timesteps, args.validate_every, episodes=args.validation_episodes,
                                 num_threads=args.num_threads, **settings)
+    callbacks = [progress]
+    ramp = None
+    if args.final_pressure_weight is not None:
+        ramp = {"initial": task.reward.pressure, "final": args.final_pressure_weight,
+                "start_steps": args.pressure_ramp[0], "end_steps": args.pressure_ramp[1]}
+        callbacks.append(PressureWarningRamp(task.reward, args.final_pressure_weight, *args.pressure_ramp))
     checkpoints = CheckpointCallback(save_freq=max(1, 100_000 // args.num_envs),
                                      save_path=str(args.out / "checkpoints"), save_vecnormalize=True)
-    model.learn(args.timesteps, callback=[progress, checkpoints], tb_log_name=f"ppo_seed{args.seed}")
+    model.learn(args.timesteps, callback=[*callbacks, checkpoints], tb_log_name=f"ppo_seed{args.seed}")
     wall = progress.training_wall()
     model.save(args.out / "ppo_model.zip")
     env.save(str(args.out / "vecnormalize.pkl"))
     config = {"timesteps": args.timesteps, "seed": args.seed, "num_envs": args.num_envs,
               "num_threads": args.num_threads, "model": args.model, "observation": args.observation,
               "training_wall_s": wall, "validation_wall_s": progress.validating_s, "ppo": PPO_SETTINGS,
-              "policy": POLICY_SETTINGS, "task": json.loads(json.dumps(asdict(task), default=repr))}
+              "policy": POLICY_SETTINGS, "pressure_ramp": ramp,
+              "task": json.loads(json.dumps(asdict(task), default=repr))}
     (args.out / "config.json").write_text(json.dumps(config, indent=1))
     (args.out / "curve.json").write_text(json.dumps({"episodes": progress.curve, "validation": progress.validation}))
 

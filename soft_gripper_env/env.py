@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields, replace
 from typing import Any
 
 import gymnasium as gym
@@ -388,6 +388,17 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
         actions = _check_actions(actions, (self.num_envs,) + self.single_action_space.shape)
         observations, reward, terminated, truncated, infos = _joined(self._map("step", self._split(actions)))
         return observations, reward, terminated, truncated, _masked(infos)
+
+    def set_reward_weights(self, weights: RewardWeights) -> None:
+        """Weighs the reward's terms by ``weights`` from the next step on, in every env, without a reset: the rest
+        of the task (and so the dynamics, observations and success) is unchanged. For a training curriculum, such as
+        a pressure warning that grows once a policy has learnt to close (``agents.train_ppo
+        --final-pressure-weight``)."""
+        if not isinstance(weights, RewardWeights):
+            raise TypeError(f"weights must be a RewardWeights, not {type(weights).__name__}")
+        self.task = replace(self.task, reward=weights)
+        for shard in self._shards:
+            shard.task = shard.batch.task = self.task
 
     def _split(self, values):
         """``values`` (one per env) cut into the shards' shares."""

@@ -102,6 +102,26 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     assert out.returncode == 2 and "acts only in the rod model it was trained in" in out.stderr
 
 
+def test_the_pressure_warning_ramp_sets_each_rollouts_weight():
+    """The ramp holds the task's weight until START, grows linearly to the final weight at END and holds it; PPO's
+    env gets each rollout's weight when the rollout begins."""
+    from stable_baselines3 import PPO
+
+    from agents.train_ppo import PressureWarningRamp, ramped
+
+    assert [ramped(steps, 100, 300, 1.0, 3.0) for steps in (0, 100, 200, 250, 300, 1000)] == [1.0, 1.0, 2.0, 2.5,
+                                                                                              3.0, 3.0]
+    assert ramped(50, 50, 50, 1.0, 3.0) == 3.0  # a step up at START
+    env = SoftGripperSB3VecEnv(2, seed=0, max_episode_steps=3, model="planar")
+    ramp = PressureWarningRamp(env.venv.task.reward, 4.0, start=8, end=24)
+    seen = []
+    original = env.venv.set_reward_weights
+    env.venv.set_reward_weights = lambda weights: (seen.append(weights.pressure), original(weights))
+    PPO("MlpPolicy", env, n_steps=4, batch_size=8, n_epochs=1, seed=0, device="cpu").learn(32, callback=ramp)
+    assert seen == [1.0, 1.0, 2.5, 4.0]  # rollouts of 2 envs x 4 steps begin at 0, 8, 16 and 24
+    assert env.venv.task.reward.pressure == 4.0 and env.venv.task.reward.hold == GraspTask().reward.hold
+
+
 @pytest.mark.parametrize("model", ["planar", "3d"])
 def test_the_shipped_policy_loads_and_beats_random(model):
     """agents/pretrained holds a PPO policy (model, statistics and config) trained on the sensors' observation: it
@@ -278,6 +298,12 @@ def test_scripts_reject_bad_arguments(tmp_path):
     out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "bound"), "--touching-closing-rate", "-1")
     assert out.returncode == 2 and "--touching-closing-rate = -1.0 1/s is outside the allowed range" in out.stderr
     assert not (tmp_path / "bound").exists()  # refused before anything is written
+    out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "ramp"), "--final-pressure-weight", "3",
+                     "--pressure-ramp", "400000", "200000")
+    assert out.returncode == 2 and "--pressure-ramp = 400000 200000 must satisfy 0 <= START <= END" in out.stderr
+    out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "ramp"), "--final-pressure-weight", "-1")
+    assert out.returncode == 2 and "--final-pressure-weight = -1.0 is outside [0, 1e6]" in out.stderr
+    assert not (tmp_path / "ramp").exists()
 
 
 def test_evaluate_refuses_a_policy_trained_on_another_action_map(tmp_path):

@@ -553,6 +553,33 @@ def test_the_pressure_penalty_keeps_growing_past_the_limit():
     assert min(terms) >= -env.task.reward.pressure
 
 
+def test_reward_weights_changed_mid_episode_scale_their_term_and_nothing_else():
+    """``set_reward_weights`` on a vector env (two shards) weighs the pressure warning anew from the next step, in
+    every env, and leaves the dynamics, observations and the other terms as they were."""
+    envs = [SoftGripperUnderwaterVectorEnv(4, num_threads=2, model="planar") for _ in range(2)]
+    for env in envs:
+        env.reset(seed=SUCCESS_SEED)
+    weights = replace(envs[0].task.reward, pressure=3.0)
+    action = np.full((4, 3), -1.0, dtype=np.float32)
+    changed = False
+    for step in range(30):
+        if step == 5:
+            envs[1].set_reward_weights(weights)
+        (obs_a, reward_a, *_, info_a), (obs_b, reward_b, *_, info_b) = (env.step(action) for env in envs)
+        np.testing.assert_array_equal(obs_a, obs_b)
+        factor = 3.0 if step >= 5 else 1.0
+        for name, term in info_a["reward_terms"].items():
+            np.testing.assert_allclose(info_b["reward_terms"][name], term * (factor if name == "pressure" else 1.0),
+                                       rtol=1e-12, atol=0)
+        changed |= bool(step >= 5 and (info_a["reward_terms"]["pressure"] < 0).any())
+    assert changed  # the warning was paid after the change, so the comparison could fail
+    assert envs[1].task.reward.pressure == 3.0 and envs[1].task.model == "planar"
+    with pytest.raises(TypeError, match="weights must be a RewardWeights"):
+        envs[1].set_reward_weights({"pressure": 3.0})
+    for env in envs:
+        env.close()
+
+
 def test_object_swept_away_by_the_current_terminates_the_episode():
     env = gym.make(ENV_ID)
     env.reset(seed=0, options={"current_velocity": (0.45, 0.0, 0.0), "current_oscillation": (0.0, 0.0, 0.0)})
