@@ -194,6 +194,21 @@ def make_policy(name: str, task: GraspTask, seed: int) -> Callable[[np.ndarray],
     return load_ppo(PRETRAINED if name == "pretrained" else Path(name))
 
 
+def add_touching_closing_rate(parser: argparse.ArgumentParser, more: str = "") -> None:
+    """``--touching-closing-rate RATE``, the task's ``touching_closing_rate`` (for this script and train_ppo)."""
+    parser.add_argument("--touching-closing-rate", type=float, default=None, metavar="RATE",
+                        help="the fastest a touching finger closes [1/s] (GraspTask.touching_closing_rate; default: "
+                             f"no bound){more}")
+
+
+def task_from_arguments(parser: argparse.ArgumentParser, **settings) -> GraspTask:
+    """The task of the command line's settings, or the parser's error naming the option that is out of range."""
+    try:
+        return GraspTask(**settings)
+    except ValueError as error:
+        parser.error(str(error).replace("GraspTask.touching_closing_rate", "--touching-closing-rate"))
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--policy", required=True, help="random, ramp, reactive, pretrained, or a train_ppo folder")
@@ -202,9 +217,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--json", type=Path, help="write the results here")
     parser.add_argument("--model", choices=("planar", "3d"), default="3d", help="rod model (default 3d)")
     parser.add_argument("--num-envs", type=int, default=16, help="episodes run at a time (default 16)")
-    parser.add_argument("--touching-closing-rate", type=float, default=None, metavar="RATE",
-                        help="the fastest a touching finger closes [1/s] (GraspTask.touching_closing_rate; default: "
-                             "no bound); a trained policy must be run with the bound it was trained with")
+    add_touching_closing_rate(parser, "; a trained policy must be run with the bound it was trained with")
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes = {args.episodes} must be at least 1")
@@ -212,10 +225,7 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--num-envs = {args.num_envs} must be at least 1")
     if args.policy not in ("random", "ramp", "reactive", "pretrained") and not Path(args.policy).is_dir():
         parser.error(f"--policy = {args.policy!r} is not random, ramp, reactive, pretrained or a folder")
-    try:
-        task = GraspTask(model=args.model, touching_closing_rate=args.touching_closing_rate)
-    except ValueError as error:
-        parser.error(str(error).replace("GraspTask.touching_closing_rate", "--touching-closing-rate"))
+    task = task_from_arguments(parser, model=args.model, touching_closing_rate=args.touching_closing_rate)
     try:
         policy = make_policy(args.policy, task, args.seed)
     except FileNotFoundError as error:

@@ -31,11 +31,11 @@ from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
-from agents.evaluate import evaluate, load_ppo, ppo_policy
+from agents.evaluate import add_touching_closing_rate, evaluate, load_ppo, ppo_policy, task_from_arguments
 from agents.learning_curves import load_run, plot_learning_curves
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
 from agents.scripted import RampPolicy, ReactivePolicy
-from soft_gripper_env.grasp_task import GraspTask, RewardWeights
+from soft_gripper_env.grasp_task import RewardWeights
 
 HELD_OUT_SEED = 1_000_000
 """First seed of the held-out evaluation: training episodes are drawn from the generators of seeds seed … seed +
@@ -159,9 +159,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--observation", choices=("full", "sensors"), default="sensors",
                         help="what the policy observes (GraspTask.observation; default sensors: the same in both rod "
                              "models, so the policy also runs in the other)")
-    parser.add_argument("--touching-closing-rate", type=float, default=None, metavar="RATE",
-                        help="the fastest a touching finger closes [1/s] (GraspTask.touching_closing_rate; default: "
-                             "no bound)")
+    add_touching_closing_rate(parser)
     parser.add_argument("--final-pressure-weight", type=float, default=None, metavar="W",
                         help="grow the reward's pressure warning (RewardWeights.pressure, 1 at the start) to W over "
                              "--pressure-ramp (default: constant)")
@@ -191,10 +189,7 @@ def main(argv: list[str] | None = None) -> dict:
             parser.error(f"--pressure-ramp = {start} {end} must satisfy 0 <= START <= END")
     settings = {"model": args.model, "observation": args.observation,
                 "touching_closing_rate": args.touching_closing_rate}
-    try:
-        task = GraspTask(**settings)
-    except ValueError as error:
-        parser.error(str(error).replace("GraspTask.touching_closing_rate", "--touching-closing-rate"))
+    task = task_from_arguments(parser, **settings)
     args.out.mkdir(parents=True, exist_ok=True)
 
     env = VecNormalize(VecMonitor(SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads,
