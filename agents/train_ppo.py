@@ -84,6 +84,11 @@ class PressureWarningRamp(BaseCallback):
     def weight(self, steps: int) -> float:
         return ramped(steps, self.start, self.end, self.weights.pressure, self.final)
 
+    def config(self) -> dict:
+        """The ramp as config.json records it (key ``pressure_ramp``)."""
+        return {"initial": self.weights.pressure, "final": self.final, "start_steps": self.start,
+                "end_steps": self.end}
+
     def _on_rollout_start(self) -> None:
         weight = self.weight(self.num_timesteps)
         self.training_env.env_method("set_reward_weights", replace(self.weights, pressure=weight), indices=[0])
@@ -206,19 +211,17 @@ def main(argv: list[str] | None = None) -> dict:
                 tensorboard_log=str(args.out / "tensorboard"))
     progress = ProgressAndCurve(args.timesteps, args.validate_every, episodes=args.validation_episodes,
                                 num_threads=args.num_threads, **settings)
-    ramp = {"initial": task.reward.pressure, "final": args.final_pressure_weight,
-            "start_steps": args.pressure_ramp[0], "end_steps": args.pressure_ramp[1]}
-    callbacks = [progress, PressureWarningRamp(task.reward, args.final_pressure_weight, *args.pressure_ramp)]
+    ramp = PressureWarningRamp(task.reward, args.final_pressure_weight, *args.pressure_ramp)
     checkpoints = CheckpointCallback(save_freq=max(1, 100_000 // args.num_envs),
                                      save_path=str(args.out / "checkpoints"), save_vecnormalize=True)
-    model.learn(args.timesteps, callback=[*callbacks, checkpoints], tb_log_name=f"ppo_seed{args.seed}")
+    model.learn(args.timesteps, callback=[progress, ramp, checkpoints], tb_log_name=f"ppo_seed{args.seed}")
     wall = progress.training_wall()
     model.save(args.out / "ppo_model.zip")
     env.save(str(args.out / "vecnormalize.pkl"))
     config = {"timesteps": args.timesteps, "seed": args.seed, "num_envs": args.num_envs,
               "num_threads": args.num_threads, "model": args.model, "observation": args.observation,
               "training_wall_s": wall, "validation_wall_s": progress.validating_s, "ppo": PPO_SETTINGS,
-              "policy": POLICY_SETTINGS, "pressure_ramp": ramp,
+              "policy": POLICY_SETTINGS, "pressure_ramp": ramp.config(),
               "task": json.loads(json.dumps(asdict(task), default=repr))}
     (args.out / "config.json").write_text(json.dumps(config, indent=1))
     (args.out / "curve.json").write_text(json.dumps({"episodes": progress.curve, "validation": progress.validation}))
