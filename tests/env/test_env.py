@@ -571,6 +571,8 @@ def test_reward_weights_changed_mid_episode_scale_their_term_and_nothing_else():
         for name, term in info_a["reward_terms"].items():
             np.testing.assert_allclose(info_b["reward_terms"][name], term * (factor if name == "pressure" else 1.0),
                                        rtol=1e-12, atol=0)
+        np.testing.assert_allclose(reward_b, reward_a + (factor - 1.0) * info_a["reward_terms"]["pressure"],
+                                   rtol=1e-12, atol=1e-12)
         changed |= bool(step >= 5 and (info_a["reward_terms"]["pressure"] < 0).any())
     assert changed  # the warning was paid after the change, so the comparison could fail
     assert envs[1].task.reward.pressure == 3.0 and envs[1].task.model == "planar"
