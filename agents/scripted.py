@@ -60,7 +60,9 @@ class ReactivePolicy:
 
     - **Approach.** A finger that does not touch closes at ``approach_rate`` [1/s], slowing within ``slow_gap``
       [m] of the specimen in proportion to its gap, to no less than ``slowest`` times that rate: a fast touch
-      presses harder than a slow one.
+      presses harder than a slow one. Within 1 cm: slowing from 2 cm lost a sinking specimen more often (3-D at
+      Δt 2.5 ms, tuning seeds 5000–5199: 0.77 success against 0.82, at the same mean peak force, 1.99 against
+      1.98 N).
     - **Cage.** A finger that touches waits for the others, backing off only if it presses above its target.
     - **Grip.** Once every finger touches, each regulates its force F to a target of ``grip`` times the specimen's
       fragility limit F_max (observed), ``gust_grip`` times it while a gust may blow (the task's window of gust
@@ -73,7 +75,7 @@ class ReactivePolicy:
     """
 
     def __init__(self, task: GraspTask | None = None, grip: float = 0.3, gust_grip: float = 0.4, gain: float = 0.2,
-                 press_rate: float = 0.02, approach_rate: float = APPROACH_RATE, slow_gap: float = 0.02,
+                 press_rate: float = 0.02, approach_rate: float = APPROACH_RATE, slow_gap: float = 0.01,
                  slowest: float = 0.2) -> None:
         self.task = task or GraspTask()
         check_range("ReactivePolicy", "approach_rate", approach_rate, "1/s", -self.task.max_curvature_rate, 0.0,

@@ -72,24 +72,27 @@ GRASP_CURVATURE = 0.25
 """|κ̄| at which the grasp scene's fingers stop closing (dimensionless), holding the sphere below the palm."""
 REFERENCE = {"dt": 2.5e-4, "n_nodes": 80, "integrator": "implicit_midpoint"}
 OUTCOME_REFERENCE = "reference"
-OUTCOME_DEFAULT = "3d, dt 0.005, tol 1e-4, friction 2 passes"
+OUTCOME_DEFAULT = "3d, dt 0.0025, tol 1e-4"
 OUTCOME_SETTINGS = {
     label: {"model": model, "physics_dt": dt, "newton": NewtonSettings(relative_tolerance=tolerance),
             "friction_passes": passes}
     for label, model, dt, tolerance, passes in (
         (OUTCOME_REFERENCE, "3d", 0.0025, 1e-9, None),
         ("3d, dt 0.0025, tol 1e-6", "3d", 0.0025, 1e-6, None),
+        ("3d, dt 0.0025, tol 1e-6, friction 2 passes", "3d", 0.0025, 1e-6, 2),
+        (OUTCOME_DEFAULT, "3d", 0.0025, 1e-4, None),
         ("3d, dt 0.0025, tol 1e-4, friction 2 passes", "3d", 0.0025, 1e-4, 2),
         ("3d, dt 0.0025, tol 1e-4, friction 1 pass", "3d", 0.0025, 1e-4, 1),
         ("3d, dt 0.005", "3d", 0.005, 1e-6, None),
         ("3d, dt 0.005, tol 1e-4", "3d", 0.005, 1e-4, None),
-        (OUTCOME_DEFAULT, "3d", 0.005, 1e-4, 2),
+        ("3d, dt 0.005, tol 1e-4, friction 2 passes", "3d", 0.005, 1e-4, 2),
         ("3d, dt 0.005, tol 1e-4, friction 1 pass", "3d", 0.005, 1e-4, 1),
         ("3d, dt 0.01", "3d", 0.01, 1e-6, None),
         ("3d, dt 0.01, tol 1e-4", "3d", 0.01, 1e-4, None),
         ("3d, dt 0.025", "3d", 0.025, 1e-6, None),
         ("3d, dt 0.05", "3d", 0.05, 1e-6, None),
         ("planar, dt 0.005", "planar", 0.005, 1e-6, None),
+        ("planar, dt 0.005, tol 1e-4, friction 2 passes", "planar", 0.005, 1e-4, 2),
         ("planar, dt 0.01", "planar", 0.01, 1e-6, None),
         ("planar, dt 0.025", "planar", 0.025, 1e-6, None),
     )

@@ -35,6 +35,26 @@ from .physics import (
 )
 
 MODELS = ("planar", "3d")
+
+
+class _ModelDefault:
+    """The default of a :class:`GraspTask` field that depends on the rod model (:data:`MODEL_DEFAULTS`)."""
+
+    def __repr__(self) -> str:
+        return "MODEL_DEFAULT"
+
+
+MODEL_DEFAULT = _ModelDefault()
+MODEL_DEFAULTS = {"3d": {"physics_dt": 0.0025, "friction_passes": None},
+                  "planar": {"physics_dt": 0.005, "friction_passes": 2}}
+"""Each rod model's default physics step [s] and cap on friction's re-solves (:class:`GraspTask`), at Newton's
+relative tolerance 1e-4. In 3-D: the fastest setting measured whose grasp outcomes agree with a fine reference
+(3-D, Δt 2.5 ms, tolerance 1e-9, friction settled) on 200 seeds under both scripted controllers: Δt 2.5 ms with
+friction settled, the reactive controller's success labels on 95.0 % of seeds and the sphere's final place a
+median 1.1 mm apart. Two friction passes at 2.5 ms agree on 94.0 % (2.6 mm), 5 ms with them on 92.0 % (4.7 mm).
+The planar model disagrees with the 3-D reference on about a fifth of those labels at every step from 5 to 25 ms:
+its error is the model's, not the step's, so it keeps the faster setting that PPO trains in, 5 ms with two
+friction passes (``docs/speed_vs_error.md``)."""
 OBSERVATIONS = ("full", "sensors")
 """What an observation holds: ``"full"``, the fingers' node states and per-node forces with the sensors' readings;
 ``"sensors"``, only what a real gripper measures or is told (the same size in both rod models)."""
@@ -94,22 +114,21 @@ class GraspTask:
     The paper's three fingers of 20 nodes by default."""
     control_dt: float = 0.05
     """Time between actions [s]; a multiple of ``physics_dt``."""
-    physics_dt: float = 0.005
-    """Implicit physics step [s]. With ``newton``'s and ``friction_passes``' defaults it was the cheapest setting
-    whose grasp outcomes agreed with a fine 3-D reference (Δt = 2.5 ms, tolerance 1e-9) on the task before its
-    redesign (success labels on ≥ 96.5 % of 200 seeds). On today's task it agrees on only 90.5 % under the reactive
-    controller (median gap 4.0 mm); Δt = 2.5 ms with the same tolerance and friction passes agrees on 95.5 % (2.4
-    mm) at 0.65 times the speed (``docs/speed_vs_error.md``)."""
+    physics_dt: float = MODEL_DEFAULT
+    """Implicit physics step [s]. By default the rod model's (:data:`MODEL_DEFAULTS`: 2.5 ms in 3-D, 5 ms planar),
+    set at construction: ``dataclasses.replace(task, model=...)`` keeps the other model's."""
     newton: NewtonSettings = field(default_factory=lambda: NewtonSettings(relative_tolerance=1e-4))
-    """Stopping rule of the Newton solve inside each physics step: relative tolerance 1e-4 (the simulator's default,
-    1e-6, changes no grasp outcome measurably and costs more iterations)."""
-    friction_passes: int | None = 2
+    """Stopping rule of the Newton solve inside each physics step: relative tolerance 1e-4. The simulator's default,
+    1e-6, costs more iterations for little agreement with the fine reference: in 3-D at 2.5 ms with friction settled
+    97.5 % of the reactive controller's labels against 95.0 % (``docs/speed_vs_error.md``)."""
+    friction_passes: int | None = MODEL_DEFAULT
     """The corrector's re-solves per physics step in which a sliding node's moved friction alone solves again
     (:attr:`~.physics.scene.objects.ContactSettings.friction_passes`); None settles friction within the whole
-    budget. Two passes make a grasping 3-D env step about 1.4× faster (a quarter of its physics steps otherwise
-    spend the corrector's whole budget cycling on friction). On today's task the outcomes' agreement with the fine
-    reference is no worse for it: 90.5 % at 5 ms (89.0 % with friction settled), 95.5 % at 2.5 ms (92.0 % with one
-    pass) (``docs/speed_vs_error.md``)."""
+    budget. By default the rod model's (:data:`MODEL_DEFAULTS`: settled in 3-D, two passes planar), set at
+    construction. Two passes make a grasping env step about 1.4× faster (a quarter of its physics steps otherwise
+    spend the corrector's whole budget cycling on friction), but in 3-D at 2.5 ms they move the grasp's outcome:
+    the reactive controller's labels agree with the fine reference on 94.0 % of seeds with them and 95.0 % without
+    (``docs/speed_vs_error.md``)."""
     max_curvature_rate: float = 0.3
     """Natural-curvature rate of an action of ±1 [1/s] (κ̄ per node at the gripper's 20 nodes per finger): the
     fastest closing. 0.3 1/s is the slowest approach that still catches the drifting specimen (the reactive
@@ -197,6 +216,9 @@ class GraspTask:
     def __post_init__(self) -> None:
         if self.model not in MODELS:
             raise ValueError(f"GraspTask.model = {self.model!r} is not one of 'planar', '3d'")
+        for name, value in MODEL_DEFAULTS[self.model].items():
+            if getattr(self, name) is MODEL_DEFAULT:
+                object.__setattr__(self, name, value)
         if self.observation not in OBSERVATIONS:
             raise ValueError(f"GraspTask.observation = {self.observation!r} is not one of 'full', 'sensors'")
         if not isinstance(self.gripper, GripperDesign):

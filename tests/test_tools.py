@@ -89,6 +89,15 @@ def test_compare_commits_refuses_a_revision_that_is_not_a_commit():
     assert "is not a commit" in out.stderr
 
 
+def test_the_outcome_studys_default_is_the_envs():
+    """The setting the study marks as the default is what GraspTask() runs with (the 3-D model's defaults)."""
+    from soft_gripper_env.grasp_task import GraspTask
+
+    task, setting = GraspTask(), OUTCOME_SETTINGS[OUTCOME_DEFAULT]
+    assert (task.model, task.physics_dt, task.newton, task.friction_passes) == (
+        setting["model"], setting["physics_dt"], setting["newton"], setting["friction_passes"])
+
+
 def test_grasp_outcome_summary_scores_settings_against_the_reference(tmp_path):
     """On synthetic runs of 20 seeds: a setting equal to the reference meets the goals; one that flips 2 labels of
     one controller (90 % agreement) misses them, as does one that leaves every object 6 mm away; the worse

@@ -23,11 +23,11 @@ from soft_gripper_env.env import (
     observation_bounds,
     observation_slices,
 )
-from soft_gripper_env.grasp_task import GraspTask
+from soft_gripper_env.grasp_task import MODEL_DEFAULTS, GraspTask
 from soft_gripper_env.physics import PAPER_BALL, NewtonSettings, paper_scene, run_ramp
 from soft_gripper_env.physics import simulator as simulator_module
 
-SUCCESS_SEED = 3
+SUCCESS_SEED = 1
 """A seed the reactive controller takes (it succeeds on about three seeds in four)."""
 
 ENV_ID = soft_gripper_env.ENV_ID
@@ -286,7 +286,7 @@ def test_bad_reset_options_raise(env, options, pattern):
 @pytest.mark.parametrize("settings_, pattern", [
     ({"model": "2d"}, r"GraspTask\.model = '2d' is not one of 'planar', '3d'"),
     ({"observation": "nodes"}, r"GraspTask\.observation = 'nodes' is not one of 'full', 'sensors'"),
-    ({"control_dt": 0.0125}, r"control_dt = 0\.0125 s must be a whole multiple of physics_dt"),
+    ({"control_dt": 0.0135}, r"control_dt = 0\.0135 s must be a whole multiple of physics_dt"),
     ({"physics_dt": 0.0}, r"physics_dt = 0\.0 s is outside the allowed range"),
     ({"physics_dt": 0.06, "control_dt": 0.06}, r"physics_dt = 0\.06 s is outside the allowed range \(0, 0\.05\] s"),
     ({"curvature_range": (-3.0, 0.0)}, r"curvature_range = -3\.0 \(dimensionless\) is outside"),
@@ -314,6 +314,23 @@ def test_the_newton_setting_reaches_the_solver():
         assert env.unwrapped._batch.sim.scene.newton.relative_tolerance == tolerance
         iterations[tolerance] = sum(env.step(np.full(3, -1.0))[4]["newton_iterations"] for _ in range(5))
     assert iterations[1e-3] < iterations[1e-9]
+
+
+def test_each_rod_model_takes_its_own_default_step_and_friction_passes():
+    """physics_dt and friction_passes default to the model's (MODEL_DEFAULTS: 2.5 ms with friction settled in 3-D,
+    5 ms with two passes planar); given ones are kept, None included."""
+    assert MODEL_DEFAULTS == {"3d": {"physics_dt": 0.0025, "friction_passes": None},
+                              "planar": {"physics_dt": 0.005, "friction_passes": 2}}
+    three_d, planar = GraspTask(), GraspTask(model="planar")
+    assert (three_d.physics_dt, three_d.friction_passes, three_d.substeps) == (0.0025, None, 20)
+    assert (planar.physics_dt, planar.friction_passes, planar.substeps) == (0.005, 2, 10)
+    given = GraspTask(model="planar", physics_dt=0.01, friction_passes=None)
+    assert (given.physics_dt, given.friction_passes) == (0.01, None)
+    assert GraspTask(friction_passes=1).friction_passes == 1
+    env = SoftGripperUnderwaterEnv()
+    env.reset(seed=0)
+    assert env.task.physics_dt == 0.0025
+    assert env.unwrapped._batch.sim.scene.contact.friction_passes is None
 
 
 def test_the_largest_physics_step_is_allowed():
