@@ -457,8 +457,13 @@ def plot_grasp_outcomes(summary: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5), sharex=True)
+    fig, (*axes, key_axis) = plt.subplots(1, 3, figsize=(15.5, 5.5), gridspec_kw={"width_ratios": (1, 1, 0.5)})
+    axes[1].sharex(axes[0])
     goals = summary["goals"]
+    # Twenty labels side by side overlap where settings cost about the same, so each point carries a number and
+    # the key beside the panels names it.
+    numbers = {label: str(k + 1) for k, label in enumerate(
+        label for label in summary["settings"] if label != summary["reference"])}
     panels = ((axes[0], lambda row: 1.0 - row["worst_label_agreement"], 1.0 - goals["label_agreement"],
                "share of seeds whose success label differs from the reference's"),
               (axes[1], lambda row: 1e3 * row["worst_median_position_gap_m"], 1e3 * goals["median_position_gap_m"],
@@ -474,7 +479,8 @@ def plot_grasp_outcomes(summary: dict, path: Path) -> None:
             ax.scatter(x, y, s=45, color=color, zorder=3)
             if label == summary["default"]:
                 ax.scatter(x, y, s=260, facecolor="none", edgecolor="k", lw=1.5, zorder=4, label="the env's default")
-            ax.annotate(label, (x, y), xytext=(5, 4), textcoords="offset points", fontsize=7)
+            ax.annotate(numbers[label], (x, y), xytext=(9, 6) if label == summary["default"] else (4, 3),
+                        textcoords="offset points", fontsize=8)
         ax.scatter([], [], color="tab:blue", label="3-D")
         ax.scatter([], [], color="tab:orange", label="planar")
         ax.set_xscale("log")
@@ -488,6 +494,11 @@ def plot_grasp_outcomes(summary: dict, path: Path) -> None:
                       f"({summary['ant_v5_steps_per_s']:,.0f} steps/s in the same run)", fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=8, loc="center left")
+    key = "\n".join(f"{numbers[label]:>2}  {label}{'  (the default)' if label == summary['default'] else ''}"
+                    for label in numbers)
+    key_axis.axis("off")
+    key_axis.text(0.0, 0.5, key, fontsize=8, family="monospace", va="center", ha="left",
+                  transform=key_axis.transAxes)
     fig.suptitle(f"grasp outcomes of each speed setting against the fine reference (3-D, N = 20, Δt = 2.5 ms, "
                  f"tolerance 1e-9)\n{summary['episodes']} seeds; each point the worse of the ramp and the reactive "
                  f"controller")
