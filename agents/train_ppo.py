@@ -27,6 +27,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
+import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
@@ -219,7 +220,10 @@ def main(argv: list[str] | None = None) -> dict:
     model.save(args.out / "ppo_model.zip")
     env.save(str(args.out / "vecnormalize.pkl"))
     config = {"timesteps": args.timesteps, "seed": args.seed, "num_envs": args.num_envs,
-              "num_threads": args.num_threads, "model": args.model, "observation": args.observation,
+              "num_threads": args.num_threads,
+              # PyTorch's thread count changes the last bits of every update (its sums run in another order), and
+              # a run then parts from one made with another count: a run reproduces only with the same one.
+              "torch_threads": torch.get_num_threads(), "model": args.model, "observation": args.observation,
               "training_wall_s": wall, "validation_wall_s": progress.validating_s, "ppo": PPO_SETTINGS,
               "policy": POLICY_SETTINGS, "pressure_ramp": ramp.config(),
               "task": json.loads(json.dumps(asdict(task), default=repr))}

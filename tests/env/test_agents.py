@@ -65,6 +65,8 @@ def test_sb3_subproc_vec_env_runs_the_single_env():
 
 
 def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_path):
+    import torch
+
     from agents import train_ppo
 
     results = train_ppo.main(["--out", str(tmp_path), "--timesteps", "256", "--num-envs", "4",
@@ -75,6 +77,7 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     assert results["ppo"] == saved["ppo"]
     config = json.loads((tmp_path / "config.json").read_text())
     assert config["timesteps"] == 256 and config["task"]["model"] == "planar"
+    assert config["torch_threads"] == torch.get_num_threads()  # needed to reproduce the run bit for bit
     assert config["pressure_ramp"] == {"initial": 1.0, "final": train_ppo.FINAL_PRESSURE_WEIGHT,
                                        "start_steps": 200_000, "end_steps": 400_000}
     assert (tmp_path / "vecnormalize.pkl").exists() and (tmp_path / "ppo_model.zip").exists()
