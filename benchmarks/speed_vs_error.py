@@ -81,6 +81,8 @@ OUTCOME_SETTINGS = {
         ("3d, dt 0.0025, tol 1e-6", "3d", 0.0025, 1e-6, None),
         ("3d, dt 0.0025, tol 1e-6, friction 2 passes", "3d", 0.0025, 1e-6, 2),
         (OUTCOME_DEFAULT, "3d", 0.0025, 1e-4, None),
+        ("3d, dt 0.0025, tol 1e-4, friction 4 passes", "3d", 0.0025, 1e-4, 4),
+        ("3d, dt 0.0025, tol 1e-4, friction 3 passes", "3d", 0.0025, 1e-4, 3),
         ("3d, dt 0.0025, tol 1e-4, friction 2 passes", "3d", 0.0025, 1e-4, 2),
         ("3d, dt 0.0025, tol 1e-4, friction 1 pass", "3d", 0.0025, 1e-4, 1),
         ("3d, dt 0.005", "3d", 0.005, 1e-6, None),
