@@ -73,7 +73,12 @@ def plot_learning_curves(runs: list[dict], path: Path) -> None:
     for ax in axes:
         ax.set_ylim(-0.02, 1.02)
         ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=7, loc="lower right")
+    if axes[0].get_legend_handles_labels()[0]:
+        axes[0].legend(fontsize=7, loc="lower right")
+    else:  # --validate-every 0 and --eval-episodes 0: say why the panels are empty
+        for ax in axes:
+            ax.text(0.5, 0.5, "no validations or held-out evaluations in these runs", ha="center",
+                    transform=ax.transAxes)
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

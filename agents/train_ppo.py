@@ -3,6 +3,7 @@
     python -m agents.train_ppo --out DIR [--timesteps 600000] [--seed 0] [--num-envs 32] [--num-threads 2]
         [--model planar] [--observation sensors] [--validate-every 50000] [--eval-episodes 200]
         [--touching-closing-rate RATE] [--final-pressure-weight 4] [--pressure-ramp 200000 400000]
+        [--checkpoint-every 100000]
 
 By default PPO trains in the planar rod model on the sensors' observation (``GraspTask.observation``): a planar
 step costs about a third of a 3-D one, so the 30 minutes buy three times the experience, and the sensors'
@@ -12,9 +13,10 @@ threads; observations and rewards are normalised by VecNormalize. The reward's p
 has begun to grasp (``--final-pressure-weight``, ``--pressure-ramp``: ``PressureWarningRamp``). DIR receives,
 together: the model (ppo_model.zip), its VecNormalize statistics (vecnormalize.pkl) and the run's configuration
 (config.json), which ``python -m agents.evaluate --policy DIR`` loads; TensorBoard logs (DIR/tensorboard:
-``tensorboard --logdir DIR``); checkpoints with their statistics; the training episodes' success and return, and
-the deterministic policy's success on validation seeds every ``--validate-every`` steps, against env steps and
-training wall time (curve.json, learning_curve.png); and, with ``--eval-episodes``, the trained policy and the
+``tensorboard --logdir DIR``); checkpoints every ``--checkpoint-every`` steps (DIR/checkpoints/steps_N, each
+the run as a run of ``--timesteps N`` would end it, loadable the same way); the training episodes' success and
+return, and the deterministic policy's success on validation seeds every ``--validate-every`` steps, against env
+steps and training wall time (curve.json, learning_curve.png); and, with ``--eval-episodes``, the trained policy and the
 scripted controllers on held-out seeds (evaluation.json; seeds from 1,000,000, which training never draws).
 """
 
@@ -23,13 +25,14 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 from stable_baselines3 import PPO
-from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
@@ -158,6 +161,37 @@ class ProgressAndCurve(BaseCallback):
         self.bar.close()
 
 
+def save_run(folder: Path, model: PPO, env: VecNormalize, config: dict) -> None:
+    """What ``agents.evaluate --policy FOLDER`` loads: the model (ppo_model.zip), its VecNormalize statistics
+    (vecnormalize.pkl) and the run's configuration (config.json)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    model.save(folder / "ppo_model.zip")
+    env.save(str(folder / "vecnormalize.pkl"))
+    (folder / "config.json").write_text(json.dumps(config, indent=1))
+
+
+class RolloutCheckpoints(BaseCallback):
+    """Saves the run (:func:`save_run`) into ``folder/steps_N`` at the start of the first rollout at or past each
+    multiple of ``every`` env steps. There PPO has trained on every rollout collected so far and not yet stepped
+    the next, so checkpoint N is the final model, statistics and config of the same run stopped at N steps
+    (``--timesteps N``), which lets one run measure the shorter budgets it passes through. (SB3's
+    CheckpointCallback saves in the middle of a rollout, a state that no shorter run ends in.)"""
+
+    def __init__(self, folder: Path, every: int, config: Callable[[], dict]) -> None:
+        super().__init__()
+        self.folder, self.every, self.config = folder, every, config
+        self.next = every
+
+    def _on_rollout_start(self) -> None:
+        if self.num_timesteps >= self.next:
+            save_run(self.folder / f"steps_{self.num_timesteps}", self.model, self.model.get_env(),
+                     {**self.config(), "timesteps": self.num_timesteps})
+            self.next = (self.num_timesteps // self.every + 1) * self.every
+
+    def _on_step(self) -> bool:
+        return True
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, required=True, help="folder for the model, statistics, config and logs")
@@ -183,13 +217,16 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--validate-every", type=int, default=50_000,
                         help="env steps between measures of the deterministic policy on validation seeds, the "
                              "learning curve (0: none)")
+    parser.add_argument("--checkpoint-every", type=int, default=100_000,
+                        help="env steps between checkpoints (DIR/checkpoints/steps_N, each loadable by "
+                             "agents.evaluate --policy and equal to a run of --timesteps N; 0: none)")
     parser.add_argument("--validation-episodes", type=int, default=VALIDATION_EPISODES,
                         help=f"episodes per validation (default {VALIDATION_EPISODES})")
     args = parser.parse_args(argv)
     for name in ("timesteps", "num_envs", "num_threads", "validation_episodes"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} = {getattr(args, name)} must be at least 1")
-    for name in ("eval_episodes", "validate_every"):
+    for name in ("eval_episodes", "validate_every", "checkpoint_every"):
         if getattr(args, name) < 0:
             parser.error(f"--{name.replace('_', '-')} = {getattr(args, name)} must be at least 0")
     if args.num_threads > args.num_envs:
@@ -213,21 +250,23 @@ def main(argv: list[str] | None = None) -> dict:
     progress = ProgressAndCurve(args.timesteps, args.validate_every, episodes=args.validation_episodes,
                                 num_threads=args.num_threads, **settings)
     ramp = PressureWarningRamp(task.reward, args.final_pressure_weight, *args.pressure_ramp)
-    checkpoints = CheckpointCallback(save_freq=max(1, 100_000 // args.num_envs),
-                                     save_path=str(args.out / "checkpoints"), save_vecnormalize=True)
-    model.learn(args.timesteps, callback=[progress, ramp, checkpoints], tb_log_name=f"ppo_seed{args.seed}")
+
+    def config() -> dict:
+        return {"timesteps": args.timesteps, "seed": args.seed, "num_envs": args.num_envs,
+                "num_threads": args.num_threads,
+                # PyTorch's thread count changes the last bits of every update (its sums run in another order),
+                # and a run then parts from one made with another count: a run reproduces only with the same one.
+                "torch_threads": torch.get_num_threads(), "model": args.model, "observation": args.observation,
+                "training_wall_s": progress.training_wall(), "validation_wall_s": progress.validating_s,
+                "ppo": PPO_SETTINGS, "policy": POLICY_SETTINGS, "pressure_ramp": ramp.config(),
+                "task": json.loads(json.dumps(asdict(task), default=repr))}
+
+    callbacks = [progress, ramp]
+    if args.checkpoint_every:
+        callbacks.append(RolloutCheckpoints(args.out / "checkpoints", args.checkpoint_every, config))
+    model.learn(args.timesteps, callback=callbacks, tb_log_name=f"ppo_seed{args.seed}")
     wall = progress.training_wall()
-    model.save(args.out / "ppo_model.zip")
-    env.save(str(args.out / "vecnormalize.pkl"))
-    config = {"timesteps": args.timesteps, "seed": args.seed, "num_envs": args.num_envs,
-              "num_threads": args.num_threads,
-              # PyTorch's thread count changes the last bits of every update (its sums run in another order), and
-              # a run then parts from one made with another count: a run reproduces only with the same one.
-              "torch_threads": torch.get_num_threads(), "model": args.model, "observation": args.observation,
-              "training_wall_s": wall, "validation_wall_s": progress.validating_s, "ppo": PPO_SETTINGS,
-              "policy": POLICY_SETTINGS, "pressure_ramp": ramp.config(),
-              "task": json.loads(json.dumps(asdict(task), default=repr))}
-    (args.out / "config.json").write_text(json.dumps(config, indent=1))
+    save_run(args.out, model, env, config() | {"training_wall_s": wall})
     (args.out / "curve.json").write_text(json.dumps({"episodes": progress.curve, "validation": progress.validation}))
 
     results = {"timesteps": args.timesteps, "seed": args.seed, "training_wall_s": wall}

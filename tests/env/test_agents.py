@@ -64,6 +64,37 @@ def test_sb3_subproc_vec_env_runs_the_single_env():
     assert results[0][11].all()  # done at the third step (episodes of 3), so the autoresets were compared too
 
 
+def test_a_checkpoint_is_the_shorter_run_it_passes_through(tmp_path):
+    """Checkpoint N of a run equals the run stopped at N steps: the same weights, statistics and config, so one
+    run measures the shorter budgets (4 envs × 128 steps: 512 steps per rollout)."""
+    import pickle
+
+    import torch
+    from stable_baselines3 import PPO
+
+    from agents import train_ppo
+
+    common = ["--num-envs", "4", "--eval-episodes", "0", "--validate-every", "0", "--seed", "3"]
+    train_ppo.main(["--out", str(tmp_path / "long"), "--timesteps", "1536", "--checkpoint-every", "1000", *common])
+    train_ppo.main(["--out", str(tmp_path / "short"), "--timesteps", "1024", "--checkpoint-every", "0", *common])
+    checkpoints = sorted(path.name for path in (tmp_path / "long" / "checkpoints").iterdir())
+    assert checkpoints == ["steps_1024"]  # the first rollout boundary at or past 1000; none at the end
+    checkpoint, short = tmp_path / "long" / "checkpoints" / "steps_1024", tmp_path / "short"
+    assert not (short / "checkpoints").exists()
+    weights = [PPO.load(folder / "ppo_model.zip").policy.state_dict() for folder in (checkpoint, short)]
+    for name, value in weights[0].items():
+        assert torch.equal(value, weights[1][name]), name
+    statistics = [pickle.loads((folder / "vecnormalize.pkl").read_bytes()) for folder in (checkpoint, short)]
+    np.testing.assert_array_equal(statistics[0].obs_rms.mean, statistics[1].obs_rms.mean)
+    np.testing.assert_array_equal(statistics[0].ret_rms.var, statistics[1].ret_rms.var)
+    configs = [json.loads((folder / "config.json").read_text()) for folder in (checkpoint, short)]
+    for config in configs:
+        del config["training_wall_s"], config["validation_wall_s"]
+    assert configs[0] == configs[1] and configs[0]["timesteps"] == 1024
+    long_weights = PPO.load(tmp_path / "long" / "ppo_model.zip").policy.state_dict()
+    assert not all(torch.equal(value, long_weights[name]) for name, value in weights[0].items())
+
+
 def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_path):
     import torch
 
