@@ -265,8 +265,9 @@ def main(argv: list[str] | None = None) -> dict:
     if args.checkpoint_every:
         callbacks.append(RolloutCheckpoints(args.out / "checkpoints", args.checkpoint_every, config))
     model.learn(args.timesteps, callback=callbacks, tb_log_name=f"ppo_seed{args.seed}")
-    wall = progress.training_wall()
-    save_run(args.out, model, env, config() | {"training_wall_s": wall})
+    final = config()
+    wall = final["training_wall_s"]
+    save_run(args.out, model, env, final)
     (args.out / "curve.json").write_text(json.dumps({"episodes": progress.curve, "validation": progress.validation}))
 
     results = {"timesteps": args.timesteps, "seed": args.seed, "training_wall_s": wall}

@@ -66,7 +66,7 @@ def test_sb3_subproc_vec_env_runs_the_single_env():
 
 def test_a_checkpoint_is_the_shorter_run_it_passes_through(tmp_path):
     """Checkpoint N of a run equals the run stopped at N steps: the same weights, statistics and config, so one
-    run measures the shorter budgets (4 envs × 128 steps: 512 steps per rollout)."""
+    run measures the shorter budgets."""
     import pickle
 
     import torch
@@ -74,12 +74,15 @@ def test_a_checkpoint_is_the_shorter_run_it_passes_through(tmp_path):
 
     from agents import train_ppo
 
+    rollout = 4 * train_ppo.PPO_SETTINGS["n_steps"]  # env steps per rollout with 4 envs
     common = ["--num-envs", "4", "--eval-episodes", "0", "--validate-every", "0", "--seed", "3"]
-    train_ppo.main(["--out", str(tmp_path / "long"), "--timesteps", "1536", "--checkpoint-every", "1000", *common])
-    train_ppo.main(["--out", str(tmp_path / "short"), "--timesteps", "1024", "--checkpoint-every", "0", *common])
+    train_ppo.main(["--out", str(tmp_path / "long"), "--timesteps", str(3 * rollout),
+                    "--checkpoint-every", str(2 * rollout - 24), *common])
+    train_ppo.main(["--out", str(tmp_path / "short"), "--timesteps", str(2 * rollout), "--checkpoint-every", "0",
+                    *common])
     checkpoints = sorted(path.name for path in (tmp_path / "long" / "checkpoints").iterdir())
-    assert checkpoints == ["steps_1024"]  # the first rollout boundary at or past 1000; none at the end
-    checkpoint, short = tmp_path / "long" / "checkpoints" / "steps_1024", tmp_path / "short"
+    assert checkpoints == [f"steps_{2 * rollout}"]  # first boundary past the interval; none at the end
+    checkpoint, short = tmp_path / "long" / "checkpoints" / f"steps_{2 * rollout}", tmp_path / "short"
     assert not (short / "checkpoints").exists()
     weights = [PPO.load(folder / "ppo_model.zip").policy.state_dict() for folder in (checkpoint, short)]
     for name, value in weights[0].items():
@@ -90,7 +93,7 @@ def test_a_checkpoint_is_the_shorter_run_it_passes_through(tmp_path):
     configs = [json.loads((folder / "config.json").read_text()) for folder in (checkpoint, short)]
     for config in configs:
         del config["training_wall_s"], config["validation_wall_s"]
-    assert configs[0] == configs[1] and configs[0]["timesteps"] == 1024
+    assert configs[0] == configs[1] and configs[0]["timesteps"] == 2 * rollout
     long_weights = PPO.load(tmp_path / "long" / "ppo_model.zip").policy.state_dict()
     assert not all(torch.equal(value, long_weights[name]) for name, value in weights[0].items())
 
