@@ -327,6 +327,43 @@ def test_env_speed_benchmark_writes_json_and_plot(tmp_path):
     assert (tmp_path / "speed.png").stat().st_size > 5000
 
 
+def test_success_force_figure_summarizes_groups_per_model_and_seed_set(tmp_path):
+    """Groups of evaluate JSONs give each panel's per-group mean and sample sd of success and peak force; results
+    of another model or seed set go in their own panel; bad groups are refused by name."""
+    def result(model, first_seed, success, force):
+        data = {"success_rate": success, "mean_peak_contact_force_N": force, "model": model,
+                "first_seed": first_seed, "episodes": 200}
+        path = tmp_path / f"{model}_{first_seed}_{success}_{force}.json"
+        path.write_text(json.dumps(data))
+        return str(path)
+
+    ppo = [result("planar", 1000, s, f) for s, f in ((0.9, 2.0), (0.8, 1.6), (0.85, 1.9))]
+    ppo_3d = result("3d", 1000, 0.7, 2.5)
+    reactive = result("planar", 1000, 0.75, 2.1)
+    out = run_script("-m", "agents.success_force", "--group", "ppo", *ppo, ppo_3d, "--group", "reactive", reactive,
+                     "--reference", "reactive", "--out", str(tmp_path / "frontier.png"))
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "frontier.png").stat().st_size > 20_000
+
+    from agents.success_force import load_evaluation, summarize
+    table = summarize({"ppo": [load_evaluation(f) for f in (*ppo, ppo_3d)], "reactive": [load_evaluation(reactive)]})
+    planar, solid = table["planar, seeds 1,000–1,199"], table["3d, seeds 1,000–1,199"]
+    assert planar["ppo"]["runs"] == 3 and solid["ppo"]["runs"] == 1 and "reactive" not in solid
+    assert math.isclose(planar["ppo"]["success_mean"], 0.85) and math.isclose(planar["ppo"]["success_sd"], 0.05)
+    assert math.isclose(planar["ppo"]["force_N_mean"], 5.5 / 3)
+    assert math.isclose(planar["ppo"]["force_N_sd"], float(np.std([2.0, 1.6, 1.9], ddof=1)))
+    assert solid["ppo"]["force_N_sd"] == 0.0 and planar["reactive"]["success_mean"] == 0.75
+
+    out = run_script("-m", "agents.success_force", "--group", "ppo", *ppo, "--reference", "reactive",
+                     "--out", str(tmp_path / "bad.png"))
+    assert out.returncode == 2 and "reference = 'reactive' is not one of the groups: ppo" in out.stderr
+    (tmp_path / "other.json").write_text(json.dumps({"success_rate": 0.5}))
+    out = run_script("-m", "agents.success_force", "--group", "x", str(tmp_path / "other.json"),
+                     "--out", str(tmp_path / "bad.png"))
+    assert out.returncode == 2 and "lacks mean_peak_contact_force_N" in out.stderr
+    assert not (tmp_path / "bad.png").exists()
+
+
 def test_scripts_reject_bad_arguments(tmp_path):
     out = run_script("-m", "agents.evaluate", "--policy", "ramp", "--episodes", "0")
     assert out.returncode == 2 and "--episodes = 0 must be at least 1" in out.stderr
