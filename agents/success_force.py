@@ -73,6 +73,8 @@ def plot_success_force(groups: dict[str, list[dict]], path: Path, reference: str
     for ax in axes.flat[len(panels):]:
         ax.set_visible(False)
     colors = {name: f"C{k}" for k, name in enumerate(groups)}
+    runs = {name: max(entries[name]["runs"] for entries in table.values() if name in entries) for name in groups}
+    labels = {name: f"{name} ({count} run{'s' if count > 1 else ''})" for name, count in runs.items()}
     for ax, panel in zip(axes.flat, panels, strict=False):  # the grid may hold a spare panel
         entries = table[panel]
         forces = [f for entry in entries.values() for f in entry["force_N"]]
@@ -86,7 +88,7 @@ def plot_success_force(groups: dict[str, list[dict]], path: Path, reference: str
             ax.scatter(entry["force_N"], entry["success"], s=18, color=color, alpha=0.55)
             ax.errorbar(entry["force_N_mean"], entry["success_mean"], xerr=entry["force_N_sd"],
                         yerr=entry["success_sd"], fmt="o", ms=8, color=color, capsize=3,
-                        label=f"{name} ({entry['runs']} run{'s' if entry['runs'] > 1 else ''})")
+                        label=labels[name])  # one legend entry per group, whatever a panel holds
         ax.axhline(success_goal, color="0.4", lw=0.8, ls=":")
         ax.set_xlim(low, high)
         ax.set_title(panel, fontsize=10)
@@ -94,8 +96,10 @@ def plot_success_force(groups: dict[str, list[dict]], path: Path, reference: str
         ax.set_ylabel("success rate")
         ax.grid(True, alpha=0.3)
     handles = {label: handle for ax in axes.flat for handle, label in zip(*ax.get_legend_handles_labels(), strict=True)}
-    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(3, len(handles)), fontsize=8)
-    fig.tight_layout(rect=(0, 0.05 + 0.03 * (len(handles) // 4), 1, 1))
+    legend_columns = min(3, len(handles))
+    legend_rows = -(-len(handles) // legend_columns)
+    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=legend_columns, fontsize=8)
+    fig.tight_layout(rect=(0, 0.02 + 0.03 * legend_rows, 1, 1))  # the axes end above the legend's rows
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
