@@ -144,7 +144,8 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
     return act
 
 
-ACTION_MAP = ("control_dt", "max_curvature_rate", "action_exponent", "curvature_range", "touching_closing_rate")
+ACTION_MAP = ("control_dt", "max_curvature_rate", "action_exponent", "curvature_range", "touching_closing_rate",
+              "approach_slowing_gap")
 """The task's settings that say what an action does: a policy trained with other values would act wrongly, not
 differently, so :func:`main` refuses it."""
 
@@ -194,11 +195,25 @@ def make_policy(name: str, task: GraspTask, seed: int) -> Callable[[np.ndarray],
     return load_ppo(PRETRAINED if name == "pretrained" else Path(name))
 
 
-def add_touching_closing_rate(parser: argparse.ArgumentParser, more: str = "") -> None:
-    """``--touching-closing-rate RATE``, the task's ``touching_closing_rate`` (for this script and train_ppo)."""
+REFLEXES = ("touching_closing_rate", "approach_slowing_gap")
+"""The task's closing reflexes that the command lines set (each an option named after it)."""
+
+
+def add_reflexes(parser: argparse.ArgumentParser, more: str = "") -> None:
+    """``--touching-closing-rate RATE`` and ``--approach-slowing-gap M``, the task's :data:`REFLEXES` (for this
+    script and train_ppo)."""
     parser.add_argument("--touching-closing-rate", type=float, default=None, metavar="RATE",
                         help="the fastest a touching finger closes [1/s] (GraspTask.touching_closing_rate; default: "
                              f"no bound){more}")
+    parser.add_argument("--approach-slowing-gap", type=float, default=None, metavar="M",
+                        help="within this gap [m] a finger's fastest closing falls linearly to the touching bound "
+                             "(GraspTask.approach_slowing_gap; needs --touching-closing-rate; default: no slowing)"
+                             f"{more}")
+
+
+def reflex_settings(args: argparse.Namespace) -> dict:
+    """The :data:`REFLEXES` as the command line set them."""
+    return {name: getattr(args, name) for name in REFLEXES}
 
 
 def task_from_arguments(parser: argparse.ArgumentParser, **settings) -> GraspTask:
@@ -206,7 +221,10 @@ def task_from_arguments(parser: argparse.ArgumentParser, **settings) -> GraspTas
     try:
         return GraspTask(**settings)
     except ValueError as error:
-        parser.error(str(error).replace("GraspTask.touching_closing_rate", "--touching-closing-rate"))
+        message = str(error)
+        for name in REFLEXES:
+            message = message.replace(f"GraspTask.{name}", "--" + name.replace("_", "-"))
+        parser.error(message)
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -217,7 +235,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--json", type=Path, help="write the results here")
     parser.add_argument("--model", choices=("planar", "3d"), default="3d", help="rod model (default 3d)")
     parser.add_argument("--num-envs", type=int, default=16, help="episodes run at a time (default 16)")
-    add_touching_closing_rate(parser, "; a trained policy must be run with the bound it was trained with")
+    add_reflexes(parser, "; a trained policy must be run with the reflexes it was trained with")
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes = {args.episodes} must be at least 1")
@@ -225,7 +243,8 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--num-envs = {args.num_envs} must be at least 1")
     if args.policy not in ("random", "ramp", "reactive", "pretrained") and not Path(args.policy).is_dir():
         parser.error(f"--policy = {args.policy!r} is not random, ramp, reactive, pretrained or a folder")
-    task = task_from_arguments(parser, model=args.model, touching_closing_rate=args.touching_closing_rate)
+    reflexes = reflex_settings(args)
+    task = task_from_arguments(parser, model=args.model, **reflexes)
     try:
         policy = make_policy(args.policy, task, args.seed)
     except FileNotFoundError as error:
@@ -239,12 +258,11 @@ def main(argv: list[str] | None = None) -> dict:
     mismatch = action_map_mismatch(getattr(policy, "trained_task", {}), task)
     if mismatch:
         parser.error(f"--policy {args.policy} was trained on a task whose actions act otherwise: {mismatch}; "
-                     f"evaluate it with the settings (--touching-closing-rate) and the version of the package it "
-                     f"was trained with")
+                     f"evaluate it with the settings (--touching-closing-rate, --approach-slowing-gap) and the "
+                     f"version of the package it was trained with")
     result = evaluate(policy, args.episodes, args.seed, num_envs=args.num_envs, model=args.model,
-                      observation=observation, touching_closing_rate=args.touching_closing_rate)
-    result.update(policy=args.policy, model=args.model, observation=observation,
-                  touching_closing_rate=args.touching_closing_rate)
+                      observation=observation, **reflexes)
+    result.update(policy=args.policy, model=args.model, observation=observation, **reflexes)
     print("| policy | model | episodes | success | mean return | mean peak finger force [N] | mean peak / limit | "
           "peak above the limit |\n|---|---|---|---|---|---|---|---|\n"
           f"| {args.policy} | {args.model} | {args.episodes} (seeds {args.seed}–{args.seed + args.episodes - 1}) | "
@@ -254,6 +272,9 @@ def main(argv: list[str] | None = None) -> dict:
     print("endings: " + ", ".join(f"{name} {count}" for name, count in result["endings"].items() if count))
     if args.touching_closing_rate is not None:
         print(f"a touching finger closed at most at {args.touching_closing_rate:g} 1/s (--touching-closing-rate)")
+    if args.approach_slowing_gap is not None:
+        print(f"within {args.approach_slowing_gap:g} m a finger closed at most at a rate falling to that bound "
+              f"(--approach-slowing-gap)")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))

@@ -2,8 +2,8 @@
 
     python -m agents.train_ppo --out DIR [--timesteps 600000] [--seed 0] [--num-envs 32] [--num-threads 2]
         [--model planar] [--observation sensors] [--validate-every 50000] [--eval-episodes 200]
-        [--touching-closing-rate RATE] [--final-pressure-weight 4] [--pressure-ramp 200000 400000]
-        [--checkpoint-every 100000]
+        [--touching-closing-rate RATE] [--approach-slowing-gap M] [--final-pressure-weight 4]
+        [--pressure-ramp 200000 400000] [--checkpoint-every 100000]
 
 By default PPO trains in the planar rod model on the sensors' observation (``GraspTask.observation``): a planar
 step costs about a third of a 3-D one, so the 30 minutes buy three times the experience, and the sensors'
@@ -36,7 +36,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
-from agents.evaluate import add_touching_closing_rate, evaluate, load_ppo, ppo_policy, task_from_arguments
+from agents.evaluate import add_reflexes, evaluate, load_ppo, ppo_policy, reflex_settings, task_from_arguments
 from agents.learning_curves import load_run, plot_learning_curves
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
 from agents.scripted import RampPolicy, ReactivePolicy
@@ -206,7 +206,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--observation", choices=("full", "sensors"), default="sensors",
                         help="what the policy observes (GraspTask.observation; default sensors: the same in both rod "
                              "models, so the policy also runs in the other)")
-    add_touching_closing_rate(parser)
+    add_reflexes(parser)
     parser.add_argument("--final-pressure-weight", type=float, default=FINAL_PRESSURE_WEIGHT, metavar="W",
                         help="grow the reward's pressure warning (RewardWeights.pressure, 1 at the start) to W over "
                              f"--pressure-ramp (default {FINAL_PRESSURE_WEIGHT:g}; 1 keeps it constant)")
@@ -236,8 +236,7 @@ def main(argv: list[str] | None = None) -> dict:
     start, end = args.pressure_ramp
     if not 0 <= start <= end:
         parser.error(f"--pressure-ramp = {start} {end} must satisfy 0 <= START <= END")
-    settings = {"model": args.model, "observation": args.observation,
-                "touching_closing_rate": args.touching_closing_rate}
+    settings = {"model": args.model, "observation": args.observation, **reflex_settings(args)}
     task = task_from_arguments(parser, **settings)
     args.out.mkdir(parents=True, exist_ok=True)
 

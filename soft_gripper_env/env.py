@@ -139,8 +139,9 @@ class SoftGripperUnderwaterEnv(gym.Env):
     harder), and fast closing at |a| near 1. κ̄ is integrated every physics step and saturates at
     ``curvature_range`` (−0.2 to 0: the maximum pressure, which curls a finger's natural shape through about 205°,
     and no pressure). With ``touching_closing_rate`` set (default None: no bound), a finger that touches the specimen
-    at the start of the interval closes no faster than that [1/s]. Finite values outside [−1, 1] are clipped. NaN,
-    inf, a wrong shape or a non-numeric action raise ``ValueError``.
+    at the start of the interval closes no faster than that [1/s], and with ``approach_slowing_gap`` [m] as well, a
+    finger within that gap closes no faster than a rate falling linearly with its gap to that bound. Finite values
+    outside [−1, 1] are clipped. NaN, inf, a wrong shape or a non-numeric action raise ``ValueError``.
 
     **Observation** ``Box(float32)``, in this order (F fingers of N nodes, 3 and 20 for the paper's gripper; D = 2
     for the planar model, where positions are (s, z) in each finger's vertical plane, s along the finger's direction

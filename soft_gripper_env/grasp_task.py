@@ -150,6 +150,15 @@ class GraspTask:
     policy closes too fast once it touches: with its actions floored at −0.5 (0.038 1/s) once a finger touches, it
     kept its success (0.88 against 0.80 on 64 tuning seeds) and its mean peak force fell from 4.0 to 2.2 N
     (docs/environment.md, *PPO*). A policy trained with a bound must be run with the same one."""
+    approach_slowing_gap: float | None = None
+    """Within this gap [m] of the specimen (:attr:`GraspEpisodes.finger_gap` at the start of the control interval)
+    a finger that does not touch closes at most at a rate falling linearly with its gap, from
+    ``max_curvature_rate`` at this gap to ``touching_closing_rate`` in contact; needs ``touching_closing_rate``.
+    None (the default): no slowing. It is the reactive controller's approach (slowing within 1 cm) made a reflex:
+    with the touching bound alone, the interval in which a finger comes to touch still closes at the policy's own
+    rate (0.3 1/s closes Δκ̄ 0.015 in one interval, about 3 N of grip), and PPO trained with that bound learnt to
+    close fast until the touch and pressed harder (docs/environment.md, *PPO*). A policy trained with it must be
+    run with the same gap."""
     curvature_range: tuple[float, float] = (-0.2, 0.0)
     """Range of κ̄ (dimensionless) the actuators reach: κ̄ saturates there, as a pneumatic finger saturates at its
     maximum pressure (−0.2: each finger's natural shape curls through about 205°) and is straight without
@@ -239,6 +248,14 @@ class GraspTask:
                     low_inclusive=True, high_inclusive=True)
         if self.touching_closing_rate is not None:
             check_range("GraspTask", "touching_closing_rate", self.touching_closing_rate, "1/s", 0.0, 100.0)
+        if self.approach_slowing_gap is not None:
+            check_range("GraspTask", "approach_slowing_gap", self.approach_slowing_gap, "m", 0.0, 0.1,
+                        high_inclusive=True)
+            if self.touching_closing_rate is None or self.touching_closing_rate > self.max_curvature_rate:
+                raise ValueError(f"GraspTask.approach_slowing_gap = {self.approach_slowing_gap!r} m slows the "
+                                 f"approach to GraspTask.touching_closing_rate, which must then be set and at most "
+                                 f"GraspTask.max_curvature_rate = {self.max_curvature_rate!r} 1/s (got "
+                                 f"{self.touching_closing_rate!r})")
         _check_interval("curvature_range", self.curvature_range, "(dimensionless)", -NATURAL_CURVATURE_LIMIT,
                         NATURAL_CURVATURE_LIMIT)
         if not self.curvature_range[0] <= 0.0 <= self.curvature_range[1]:
@@ -503,8 +520,9 @@ class GraspBatch:
         """Advances the episodes where ``active`` (B,) by one control interval with ``action`` (B, F) in [−1, 1]."""
         task = self.task
         rate = task.curvature_rate(action)
-        if task.touching_closing_rate is not None:  # closing lowers κ̄
-            rate = np.where(self.touching, np.maximum(rate, -task.touching_closing_rate), rate)
+        fastest = self.fastest_closing
+        if fastest is not None:  # closing lowers κ̄
+            rate = np.maximum(rate, -fastest)
         advanced = self.sim.advance(self.state, self.natural_curvature, rate, task.substeps, task.curvature_range,
                                     running=active, clock=self.time)
         self.state, self.natural_curvature, self.time = advanced.state, advanced.natural_curvature, advanced.clock
@@ -567,6 +585,19 @@ class GraspBatch:
         distance = np.linalg.norm(nodes - self.object_position[:, None, None, :], axis=-1) \
             - self.sim.finger_contact_radius
         return np.maximum(distance.min(axis=2) - radius[:, None], 0.0)
+
+    @property
+    def fastest_closing(self) -> np.ndarray | None:
+        """The fastest each finger may close in the coming control interval [1/s], (B, F), by the task's reflexes
+        (``touching_closing_rate``, ``approach_slowing_gap``); None when it has none."""
+        task = self.task
+        if task.touching_closing_rate is None:
+            return None
+        free = task.max_curvature_rate
+        if task.approach_slowing_gap is not None:
+            nearness = np.minimum(self.finger_gap / task.approach_slowing_gap, 1.0)
+            free = task.touching_closing_rate + (task.max_curvature_rate - task.touching_closing_rate) * nearness
+        return np.where(self.touching, task.touching_closing_rate, free)
 
     @property
     def touching(self) -> np.ndarray:

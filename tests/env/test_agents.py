@@ -374,6 +374,10 @@ def test_scripts_reject_bad_arguments(tmp_path):
     out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "bound"), "--touching-closing-rate", "-1")
     assert out.returncode == 2 and "--touching-closing-rate = -1.0 1/s is outside the allowed range" in out.stderr
     assert not (tmp_path / "bound").exists()  # refused before anything is written
+    out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "bound"), "--approach-slowing-gap", "0.01")
+    assert out.returncode == 2 and "--approach-slowing-gap = 0.01 m slows the approach to --touching-closing-rate, " \
+        "which must then be set" in out.stderr, out.stderr
+    assert not (tmp_path / "bound").exists()
     out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "ramp"), "--final-pressure-weight", "3",
                      "--pressure-ramp", "400000", "200000")
     assert out.returncode == 2 and "--pressure-ramp = 400000 200000 must satisfy 0 <= START <= END" in out.stderr
@@ -401,10 +405,10 @@ def test_evaluate_refuses_a_policy_trained_on_another_action_map(tmp_path):
     assert "max_curvature_rate = 0.5 (today 0.3)" in out.stderr and "curvature_range = [-0.25, 0.0]" in out.stderr
 
 
-def test_evaluate_runs_a_policy_only_with_the_touching_closing_bound_it_was_trained_with(tmp_path):
-    """A bound on a touching finger's closing rate is part of what an action does: a policy trained with one is
-    refused without it (and the shipped one, trained without, is refused with one); given the same bound it runs,
-    and a bound out of range is refused by name."""
+def test_evaluate_runs_a_policy_only_with_the_closing_reflexes_it_was_trained_with(tmp_path):
+    """The closing reflexes (a touching finger's bound, the approach's slowing gap) are part of what an action does:
+    a policy trained with them is refused without them (and the shipped one, trained without, is refused with
+    them); given the same reflexes it runs, and a bound out of range is refused by name."""
     import shutil
 
     from agents.evaluate import action_map_mismatch
@@ -418,17 +422,25 @@ def test_evaluate_runs_a_policy_only_with_the_touching_closing_bound_it_was_trai
     config["task"]["touching_closing_rate"] = 0.04
     assert action_map_mismatch(config["task"], GraspTask(touching_closing_rate=0.04)) is None
     assert "touching_closing_rate = 0.04 (today None)" in action_map_mismatch(config["task"], GraspTask())
+    config["task"]["approach_slowing_gap"] = 0.01
+    both = GraspTask(touching_closing_rate=0.04, approach_slowing_gap=0.01)
+    assert action_map_mismatch(config["task"], both) is None
+    assert action_map_mismatch(config["task"], GraspTask(touching_closing_rate=0.04)) == \
+        "approach_slowing_gap = 0.01 (today None)"
 
     folder = tmp_path / "policy"
     shutil.copytree(ROOT / "agents" / "pretrained", folder)
     (folder / "config.json").write_text(json.dumps(config))
     out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1")
-    assert out.returncode == 2 and "touching_closing_rate = 0.04 (today None)" in out.stderr, out.stderr
+    assert out.returncode == 2 and "touching_closing_rate = 0.04 (today None), approach_slowing_gap = 0.01 (today " \
+        "None)" in out.stderr, out.stderr
     out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1", "--model", "planar",
-                     "--touching-closing-rate", "0.04", "--json", str(tmp_path / "result.json"))
+                     "--touching-closing-rate", "0.04", "--approach-slowing-gap", "0.01",
+                     "--json", str(tmp_path / "result.json"))
     assert out.returncode == 0, out.stderr
-    assert json.loads((tmp_path / "result.json").read_text())["touching_closing_rate"] == 0.04
-    assert "closed at most at 0.04 1/s" in out.stdout
+    result = json.loads((tmp_path / "result.json").read_text())
+    assert (result["touching_closing_rate"], result["approach_slowing_gap"]) == (0.04, 0.01)
+    assert "closed at most at 0.04 1/s" in out.stdout and "(--approach-slowing-gap)" in out.stdout
     out = run_script("-m", "agents.evaluate", "--policy", "reactive", "--episodes", "1",
                      "--touching-closing-rate", "0")
     assert out.returncode == 2 and "--touching-closing-rate = 0.0 1/s is outside the allowed range" in out.stderr

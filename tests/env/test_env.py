@@ -474,6 +474,41 @@ def test_a_touching_finger_closes_no_faster_than_the_bound_and_the_others_as_ask
         GraspTask(touching_closing_rate=-0.1)
 
 
+def test_an_approaching_finger_slows_linearly_with_its_gap_to_the_touching_bound():
+    """With ``approach_slowing_gap`` G as well, the fastest closing moves a finger that does not touch by
+    (b + (r − b)·min(gap/G, 1))·Δt, gap read at the start of the interval, r the fastest rate and b the touching
+    bound; a finger far away closes at r, one in contact but not yet touching at b. Without the touching bound, or
+    with a bound above r, the gap is refused."""
+    bound, slowing_gap = 0.05, 0.02
+    env = gym.make(ENV_ID, model="planar", touching_closing_rate=bound, approach_slowing_gap=slowing_gap)
+    env.reset(seed=5000)
+    batch = env.unwrapped._batch
+    dt, full = batch.task.control_dt, batch.task.max_curvature_rate
+    seen = set()
+    for _ in range(60):
+        touching, gap = batch.touching[0].copy(), batch.finger_gap[0].copy()
+        before = batch.natural_curvature[0].copy()
+        env.step(np.full(3, -1.0, dtype=np.float32))
+        change = batch.natural_curvature[0] - before
+        for f in range(3):
+            fastest = bound if touching[f] else bound + (full - bound) * min(gap[f] / slowing_gap, 1.0)
+            expected = np.clip(before[f] - fastest * dt, *batch.task.curvature_range) - before[f]
+            assert change[f] == pytest.approx(expected, abs=1e-12), (f, touching[f], gap[f])
+            seen.add("touching" if touching[f] else "far" if gap[f] >= slowing_gap else "near")
+        if seen == {"touching", "far", "near"}:
+            break
+    assert seen == {"touching", "far", "near"}, seen
+    env.close()
+    with pytest.raises(ValueError, match=r"GraspTask\.approach_slowing_gap = 0\.01 m slows the approach to "
+                                         r"GraspTask\.touching_closing_rate, which must then be set"):
+        GraspTask(approach_slowing_gap=0.01)
+    with pytest.raises(ValueError, match=r"at most GraspTask\.max_curvature_rate = 0\.3 1/s \(got 0\.5\)"):
+        GraspTask(approach_slowing_gap=0.01, touching_closing_rate=0.5)
+    with pytest.raises(ValueError, match=r"GraspTask\.approach_slowing_gap = 0\.0 m is outside the allowed range "
+                                         r"\(0, 0\.1\]"):
+        GraspTask(approach_slowing_gap=0.0, touching_closing_rate=0.05)
+
+
 def test_reactive_grasp_succeeds_once_held_through_the_gust():
     """On a seed the reactive controller takes, is_success turns on only after the gust has passed and the hold
     has lasted 1 s, and the episode ends truncated at 4 s with the success bonus."""
