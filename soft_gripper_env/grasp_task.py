@@ -154,11 +154,10 @@ class GraspTask:
     """Within this gap [m] of the specimen (:attr:`GraspEpisodes.finger_gap` at the start of the control interval)
     a finger that does not touch closes at most at a rate falling linearly with its gap, from
     ``max_curvature_rate`` at this gap to ``touching_closing_rate`` in contact; needs ``touching_closing_rate``.
-    None (the default): no slowing. It is the reactive controller's approach (slowing within 1 cm) made a reflex:
-    with the touching bound alone, the interval in which a finger comes to touch still closes at the policy's own
-    rate (0.3 1/s closes Δκ̄ 0.015 in one interval, about 3 N of grip), and PPO trained with that bound learnt to
-    close fast until the touch and pressed harder (docs/environment.md, *PPO*). A policy trained with it must be
-    run with the same gap."""
+    None (the default): no slowing. It is the reactive controller's approach (slowing within 1 cm) made a reflex,
+    and the controller acts the same with it. Both reflexes on a policy trained without them trade success for
+    force; PPO trained with them (0.065 1/s and 1 cm) held the specimen tighter (docs/environment.md, *PPO*), so
+    neither is the default. A policy trained with it must be run with the same gap."""
     curvature_range: tuple[float, float] = (-0.2, 0.0)
     """Range of κ̄ (dimensionless) the actuators reach: κ̄ saturates there, as a pneumatic finger saturates at its
     maximum pressure (−0.2: each finger's natural shape curls through about 205°) and is straight without
