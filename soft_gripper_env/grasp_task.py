@@ -144,14 +144,14 @@ class GraspTask:
     specimen needs rates a hundredth of the closing rate's, and with p = 3 they lie at |a| ≈ 0.3 and not 0.04,
     where an exploring policy's noise of a few tenths would crush it."""
     touching_closing_rate: float | None = None
-    """The fastest a finger that touches the specimen (:attr:`GraspEpisodes.touching`, as the observation reads it
+    """The fastest a finger that touches the specimen (:attr:`GraspBatch.touching`, as the observation reads it
     at the start of the control interval) closes [1/s], whatever its action asks; opening is never bounded. None
     (the default): no bound. It is the reactive controller's own rule made a reflex of the gripper. The shipped
     policy closes too fast once it touches: with its actions floored at −0.5 (0.038 1/s) once a finger touches, it
     kept its success (0.88 against 0.80 on 64 tuning seeds) and its mean peak force fell from 4.0 to 2.2 N
     (docs/environment.md, *PPO*). A policy trained with a bound must be run with the same one."""
     approach_slowing_gap: float | None = None
-    """Within this gap [m] of the specimen (:attr:`GraspEpisodes.finger_gap` at the start of the control interval)
+    """Within this gap [m] of the specimen (:attr:`GraspBatch.finger_gap` at the start of the control interval)
     a finger that does not touch closes at most at a rate falling linearly with its gap, from
     ``max_curvature_rate`` at this gap to ``touching_closing_rate`` in contact; needs ``touching_closing_rate``.
     None (the default): no slowing. It is the reactive controller's approach (slowing within 1 cm) made a reflex,
