@@ -263,17 +263,22 @@ def test_fingers_close_on_a_free_capsule():
     """A capsule across the gripper, slightly heavier than water, with friction μ = 0.6: every step converges and
     resolves with holds on its surface and no penetration, and the fingers hold it. Finger 1 closes along the
     capsule's axis, where its nodes slide (with stick contact alone they had nowhere to go, and the corrector
-    cycled). Every finger holds it from 0.4 s to 1.2 s; later, as κ̄ passes −0.2, the grip can squeeze the capsule out
-    along its axis, and whether it does by 1.5 s depends on rounding (with 2026-12-02's NumPy 2.4 and Numba 0.68 it
-    starts at 1.32 s, on a commit that held it to the end the day before), so the end is not checked."""
+    cycled). From 0.4 s to 1.2 s every finger holds it on ≥ 95 % of the steps, never lets go for more than two steps
+    in a row, and the capsule stays within 40 mm of where it started (without friction, or with μ = 0.2, it is
+    squeezed out along its axis: fingers off for 70+ steps, 0.24 m away). The grip's details are chaotic: moving the
+    capsule by 1e-12 m turns a one-step lapse of one finger's contact at 1.14 s into none (and with 2026-12-03's
+    NumPy 2.4.6 / Numba 0.68.1 that lapse is there), so the test bounds the hold rather than asking for every step;
+    after 1.2 s the squeeze-out starts at a time that depends on rounding, and the end is not checked."""
     from test_contact import segment_distance
 
     capsule = Capsule(0.04, (0.0, -0.05, -0.1), (0.0, 0.05, -0.1), density=1100.0, friction=0.6)
     sim = Simulator(paper_scene("3d", medium="water", grasped_object=capsule))
     capsule_ends = (np.array([0.0, -0.05, 0.0]), np.array([0.0, 0.05, 0.0]))  # in the body frame
     state = sim.initial_state()
+    start = state.body_position[0].copy()
     slid = 0
-    for step in range(150):
+    finger_holds = []
+    for step in range(120):
         result = sim.step(state, max(-0.6 * state.time, -0.25))
         assert result.converged.all() and result.contact.resolved.all()
         slid += int(result.contact.sliding.sum())
@@ -286,9 +291,16 @@ def test_fingers_close_on_a_free_capsule():
         np.testing.assert_allclose(distance[stuck], capsule.radius, atol=1e-9)
         np.testing.assert_allclose(distance[result.contact.sliding[0]], capsule.radius, atol=1e-5)
         assert np.all(result.contact.normal_reaction[state.held] >= 0)
-        if 40 <= step < 120:
-            assert state.held[0].any(axis=1).all(), step  # every finger holds it
+        if step >= 40:
+            finger_holds.append(state.held[0].any(axis=1))
+            assert np.linalg.norm(state.body_position[0] - start) <= 0.04, step
     assert slid > 0
+    finger_holds = np.array(finger_holds)
+    assert finger_holds.mean(axis=0).min() >= 0.95
+    steps_off = np.zeros(3, dtype=int)  # each finger's current run of steps off the capsule
+    for holds in finger_holds:
+        steps_off = np.where(holds, 0, steps_off + 1)
+        assert steps_off.max() <= 2
 
 
 def test_a_step_whose_corrector_spends_its_budget_is_halved():
