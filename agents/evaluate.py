@@ -137,11 +137,16 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
         normalize = pickle.load(f)
     normalize.training = False
 
-    config_file = model_dir / "config.json"
     act = ppo_policy(model, normalize, f"the policy in {model_dir}")
-    act.trained_task = json.loads(config_file.read_text()).get("task", {}) if config_file.exists() else {}
+    act.trained_task = trained_task(model_dir)
     act.observation = act.trained_task.get("observation", "full")
     return act
+
+
+def trained_task(model_dir: Path) -> dict:
+    """The task a policy folder's config.json says it was trained on (its ``task``), or {} without one."""
+    config_file = Path(model_dir) / "config.json"
+    return json.loads(config_file.read_text()).get("task", {}) if config_file.exists() else {}
 
 
 ACTION_MAP = ("control_dt", "max_curvature_rate", "action_exponent", "curvature_range", "touching_closing_rate",
@@ -235,7 +240,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--json", type=Path, help="write the results here")
     parser.add_argument("--model", choices=("planar", "3d"), default="3d", help="rod model (default 3d)")
     parser.add_argument("--num-envs", type=int, default=16, help="episodes run at a time (default 16)")
-    add_reflexes(parser, "; a trained policy must be run with the reflexes it was trained with")
+    add_reflexes(parser, "; a trained policy runs with the reflexes it was trained with, taken from its "
+                         "config.json when not given")
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes = {args.episodes} must be at least 1")
@@ -244,6 +250,14 @@ def main(argv: list[str] | None = None) -> dict:
     if args.policy not in ("random", "ramp", "reactive", "pretrained") and not Path(args.policy).is_dir():
         parser.error(f"--policy = {args.policy!r} is not random, ramp, reactive, pretrained or a folder")
     reflexes = reflex_settings(args)
+    if args.policy not in ("random", "ramp", "reactive"):  # a trained policy brings the reflexes it learned with
+        trained = trained_task(PRETRAINED if args.policy == "pretrained" else Path(args.policy))
+        from_policy = {name: trained[name] for name in REFLEXES
+                       if reflexes[name] is None and trained.get(name) is not None}
+        reflexes.update(from_policy)
+        if from_policy:
+            print("the closing reflexes from the policy's config.json: "
+                  + ", ".join(f"--{name.replace('_', '-')} {value:g}" for name, value in from_policy.items()))
     task = task_from_arguments(parser, model=args.model, **reflexes)
     try:
         policy = make_policy(args.policy, task, args.seed)
@@ -270,11 +284,12 @@ def main(argv: list[str] | None = None) -> dict:
           f"{result['mean_peak_contact_force_N']:.2f} | {result['mean_peak_load']:.2f} | "
           f"{result['fraction_peak_above_limit']:.0%} of episodes |")
     print("endings: " + ", ".join(f"{name} {count}" for name, count in result["endings"].items() if count))
-    if args.touching_closing_rate is not None:
-        print(f"a touching finger closed at most at {args.touching_closing_rate:g} 1/s (--touching-closing-rate)")
-    if args.approach_slowing_gap is not None:
-        print(f"within {args.approach_slowing_gap:g} m a finger closed at most at a rate falling to that bound "
-              f"(--approach-slowing-gap)")
+    if reflexes["touching_closing_rate"] is not None:
+        print(f"a touching finger closed at most at {reflexes['touching_closing_rate']:g} 1/s "
+              f"(--touching-closing-rate)")
+    if reflexes["approach_slowing_gap"] is not None:
+        print(f"within {reflexes['approach_slowing_gap']:g} m a finger closed at most at a rate falling to that "
+              f"bound (--approach-slowing-gap)")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))

@@ -408,8 +408,9 @@ def test_evaluate_refuses_a_policy_trained_on_another_action_map(tmp_path):
 
 def test_evaluate_runs_a_policy_only_with_the_closing_reflexes_it_was_trained_with(tmp_path):
     """The closing reflexes (a touching finger's bound, the approach's slowing gap) are part of what an action does:
-    a policy trained with them is refused without them (and the shipped one, trained without, is refused with
-    them); given the same reflexes it runs, and a bound out of range is refused by name."""
+    a policy trained with them runs with them, from its config.json when the command line does not give them, and
+    is refused with others (the shipped one, trained without, is refused with them); a bound out of range is
+    refused by name."""
     import shutil
 
     from agents.evaluate import action_map_mismatch
@@ -432,16 +433,21 @@ def test_evaluate_runs_a_policy_only_with_the_closing_reflexes_it_was_trained_wi
     folder = tmp_path / "policy"
     shutil.copytree(ROOT / "agents" / "pretrained", folder)
     (folder / "config.json").write_text(json.dumps(config))
-    out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1")
-    assert out.returncode == 2 and "touching_closing_rate = 0.04 (today None), approach_slowing_gap = 0.01 (today " \
-        "None)" in out.stderr, out.stderr
     out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1", "--model", "planar",
-                     "--touching-closing-rate", "0.04", "--approach-slowing-gap", "0.01",
-                     "--json", str(tmp_path / "result.json"))
-    assert out.returncode == 0, out.stderr
-    result = json.loads((tmp_path / "result.json").read_text())
-    assert (result["touching_closing_rate"], result["approach_slowing_gap"]) == (0.04, 0.01)
-    assert "closed at most at 0.04 1/s" in out.stdout and "(--approach-slowing-gap)" in out.stdout
+                     "--touching-closing-rate", "0.05")
+    assert out.returncode == 2 and "touching_closing_rate = 0.04 (today 0.05)" in out.stderr, out.stderr
+    for given in ([], ["--touching-closing-rate", "0.04", "--approach-slowing-gap", "0.01"]):
+        out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1", "--model", "planar",
+                         *given, "--json", str(tmp_path / "result.json"))
+        assert out.returncode == 0, out.stderr
+        result = json.loads((tmp_path / "result.json").read_text())
+        assert (result["touching_closing_rate"], result["approach_slowing_gap"]) == (0.04, 0.01)
+        assert "closed at most at 0.04 1/s" in out.stdout and "(--approach-slowing-gap)" in out.stdout
+        assert ("the closing reflexes from the policy's config.json: --touching-closing-rate 0.04, "
+                "--approach-slowing-gap 0.01" in out.stdout) == (not given)
+    out = run_script("-m", "agents.evaluate", "--policy", "pretrained", "--episodes", "1", "--model", "planar",
+                     "--approach-slowing-gap", "0.01", "--touching-closing-rate", "0.04")
+    assert out.returncode == 2 and "touching_closing_rate = None (today 0.04)" in out.stderr, out.stderr
     out = run_script("-m", "agents.evaluate", "--policy", "reactive", "--episodes", "1",
                      "--touching-closing-rate", "0")
     assert out.returncode == 2 and "--touching-closing-rate = 0.0 1/s is outside the allowed range" in out.stderr
