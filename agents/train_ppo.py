@@ -58,13 +58,13 @@ PRESSURE_RAMP = (200_000, 400_000)
 """The pressure warning's curriculum (``PressureWarningRamp``): its weight 1 until 200,000 env steps, when PPO
 has begun to grasp, then growing to 4 at 400,000. Against a constant weight 1 (three seeds each, the same
 settings and seeds, 200 held-out seeds) it made the policies both gentler and more successful; a weight of 3 from
-the start kept two seeds of three from learning to close (docs/environment.md, *PPO*)."""
+the start kept two seeds of three from learning to close (docs/ppo_experiments.md)."""
 POLICY_SETTINGS = {"net_arch": [128, 128], "log_std_init": 0.0}
 """MlpPolicy's network and initial action spread (std 1, SB3's default). Narrower starts keep more of a good
 policy's holds (the reactive controller with per-step noise of std 0.2 keeps 50 % of its success, with 0.37 only
 5 %), but the cubic action map turns a narrow start into no motion at all: with std 0.2, PPO's return stayed at
 the passive policy's (about 7) for 200,000 steps, while with std 1 it rose to 75 within 300,000 (seed 0, 3-D;
-docs/environment.md)."""
+docs/ppo_experiments.md)."""
 
 
 def ramped(steps: int, start: int, end: int, initial: float, final: float) -> float:

@@ -149,14 +149,14 @@ class GraspTask:
     (the default): no bound. It is the reactive controller's own rule made a reflex of the gripper. The shipped
     policy closes too fast once it touches: with its actions floored at −0.5 (0.038 1/s) once a finger touches, it
     kept its success (0.88 against 0.80 on 64 tuning seeds) and its mean peak force fell from 4.0 to 2.2 N
-    (docs/environment.md, *PPO*). A policy trained with a bound must be run with the same one."""
+    (docs/ppo_experiments.md). A policy trained with a bound must be run with the same one."""
     approach_slowing_gap: float | None = None
     """Within this gap [m] of the specimen (:attr:`GraspBatch.finger_gap` at the start of the control interval)
     a finger that does not touch closes at most at a rate falling linearly with its gap, from
     ``max_curvature_rate`` at this gap to ``touching_closing_rate`` in contact; needs ``touching_closing_rate``.
     None (the default): no slowing. It is the reactive controller's approach (slowing within 1 cm) made a reflex,
     and the controller acts the same with it. Both reflexes on a policy trained without them trade success for
-    force; PPO trained with them (0.065 1/s and 1 cm) held the specimen tighter (docs/environment.md, *PPO*), so
+    force; PPO trained with them (0.065 1/s and 1 cm) held the specimen tighter (docs/ppo_experiments.md), so
     neither is the default. A policy trained with it must be run with the same gap."""
     curvature_range: tuple[float, float] = (-0.2, 0.0)
     """Range of κ̄ (dimensionless) the actuators reach: κ̄ saturates there, as a pneumatic finger saturates at its
