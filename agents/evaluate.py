@@ -204,16 +204,36 @@ REFLEXES = ("touching_closing_rate", "approach_slowing_gap")
 """The task's closing reflexes that the command lines set (each an option named after it)."""
 
 
-def add_reflexes(parser: argparse.ArgumentParser, more: str = "") -> None:
+def bound_or_none(text: str) -> float | None:
+    """A reflex option's value: a number, or ``none`` for no reflex."""
+    return None if text.strip().lower() == "none" else float(text)
+
+
+class _FromPolicy:
+    def __repr__(self) -> str:
+        return "a trained policy's, from its config.json; none for random, ramp and reactive"
+
+
+FROM_POLICY = _FromPolicy()
+"""The evaluate script's default reflexes: a trained policy's from its config.json, none for the scripted ones."""
+
+
+def add_reflexes(parser: argparse.ArgumentParser, more: str = "", defaults: dict | None = None) -> None:
     """``--touching-closing-rate RATE`` and ``--approach-slowing-gap M``, the task's :data:`REFLEXES` (for this
-    script and train_ppo)."""
-    parser.add_argument("--touching-closing-rate", type=float, default=None, metavar="RATE",
-                        help="the fastest a touching finger closes [1/s] (GraspTask.touching_closing_rate; default: "
-                             f"no bound){more}")
-    parser.add_argument("--approach-slowing-gap", type=float, default=None, metavar="M",
+    script and train_ppo), each ``none`` or a number; ``defaults`` maps a reflex to its default (None: none)."""
+    defaults = defaults or {}
+    rate, gap = (defaults.get(name) for name in REFLEXES)
+
+    def shown(default) -> str:
+        return "none" if default is None else f"{default:g}" if isinstance(default, float) else repr(default)
+
+    parser.add_argument("--touching-closing-rate", type=bound_or_none, default=rate, metavar="RATE",
+                        help="the fastest a touching finger closes [1/s] (GraspTask.touching_closing_rate; none: no "
+                             f"bound; default: {shown(rate)}){more}")
+    parser.add_argument("--approach-slowing-gap", type=bound_or_none, default=gap, metavar="M",
                         help="within this gap [m] a finger's fastest closing falls linearly to the touching bound "
-                             "(GraspTask.approach_slowing_gap; needs --touching-closing-rate; default: no slowing)"
-                             f"{more}")
+                             "(GraspTask.approach_slowing_gap; needs --touching-closing-rate; none: no slowing; "
+                             f"default: {shown(gap)}){more}")
 
 
 def reflex_settings(args: argparse.Namespace) -> dict:
@@ -240,8 +260,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--json", type=Path, help="write the results here")
     parser.add_argument("--model", choices=("planar", "3d"), default="3d", help="rod model (default 3d)")
     parser.add_argument("--num-envs", type=int, default=16, help="episodes run at a time (default 16)")
-    add_reflexes(parser, "; a trained policy runs with the reflexes it was trained with, taken from its "
-                         "config.json when not given")
+    add_reflexes(parser, "; a trained policy runs only with the reflexes it was trained with",
+                 defaults=dict.fromkeys(REFLEXES, FROM_POLICY))
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes = {args.episodes} must be at least 1")
@@ -250,14 +270,14 @@ def main(argv: list[str] | None = None) -> dict:
     if args.policy not in ("random", "ramp", "reactive", "pretrained") and not Path(args.policy).is_dir():
         parser.error(f"--policy = {args.policy!r} is not random, ramp, reactive, pretrained or a folder")
     reflexes = reflex_settings(args)
-    if args.policy not in ("random", "ramp", "reactive"):  # a trained policy brings the reflexes it learned with
-        trained = trained_task(PRETRAINED if args.policy == "pretrained" else Path(args.policy))
-        from_policy = {name: trained[name] for name in REFLEXES
-                       if reflexes[name] is None and trained.get(name) is not None}
-        reflexes.update(from_policy)
-        if from_policy:
-            print("the closing reflexes from the policy's config.json: "
-                  + ", ".join(f"--{name.replace('_', '-')} {value:g}" for name, value in from_policy.items()))
+    trained = {} if args.policy in ("random", "ramp", "reactive") else \
+        trained_task(PRETRAINED if args.policy == "pretrained" else Path(args.policy))
+    from_policy = {name: trained.get(name) for name in REFLEXES if reflexes[name] is FROM_POLICY}
+    reflexes.update(from_policy)
+    if any(value is not None for value in from_policy.values()):
+        print("the closing reflexes from the policy's config.json: "
+              + ", ".join(f"--{name.replace('_', '-')} {value:g}" for name, value in from_policy.items()
+                          if value is not None))
     task = task_from_arguments(parser, model=args.model, **reflexes)
     try:
         policy = make_policy(args.policy, task, args.seed)

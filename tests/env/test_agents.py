@@ -436,6 +436,9 @@ def test_evaluate_runs_a_policy_only_with_the_closing_reflexes_it_was_trained_wi
     out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1", "--model", "planar",
                      "--touching-closing-rate", "0.05")
     assert out.returncode == 2 and "touching_closing_rate = 0.04 (today 0.05)" in out.stderr, out.stderr
+    out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1", "--model", "planar",
+                     "--approach-slowing-gap", "none")
+    assert out.returncode == 2 and "approach_slowing_gap = 0.01 (today None)" in out.stderr, out.stderr
     for given in ([], ["--touching-closing-rate", "0.04", "--approach-slowing-gap", "0.01"]):
         out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1", "--model", "planar",
                          *given, "--json", str(tmp_path / "result.json"))
