@@ -72,6 +72,7 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
     num_envs = max(1, min(num_envs, episodes))
     venv = SoftGripperUnderwaterVectorEnv(num_envs, **settings)
     task = venv.task
+    check_action_map(policy, task)
     offset_part = observation_slices(task)["object_offset"]
     term_names = [term.name for term in fields(RewardWeights)]
     records: list[dict] = []
@@ -168,6 +169,16 @@ def action_map_mismatch(trained_task: dict, task: GraspTask) -> str | None:
     differing = [f"{name} = {trained_task[name]!r} (today {today[name]!r})" for name in ACTION_MAP
                  if name in trained_task and not same(trained_task[name], today[name])]
     return ", ".join(differing) or None
+
+
+def check_action_map(policy: Callable[[np.ndarray], np.ndarray], task: GraspTask) -> None:
+    """Raises ValueError where a trained policy (one with a ``trained_task``, as :func:`load_ppo` gives) would act
+    in ``task`` otherwise than it was trained to (:func:`action_map_mismatch`): it would act wrongly, silently."""
+    mismatch = action_map_mismatch(getattr(policy, "trained_task", {}), task)
+    if mismatch:
+        raise ValueError(f"the policy was trained on a task whose actions act otherwise: {mismatch}; run it with "
+                         f"the settings (the closing reflexes among them) and the version of the package it was "
+                         f"trained with")
 
 
 def ppo_policy(model, normalize, name: str = "the policy") -> Callable[[np.ndarray], np.ndarray]:
@@ -289,11 +300,10 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--policy {args.policy} takes observations of {policy.observation_size} values, and the "
                      f"{args.model} model gives {expected} (a policy trained on observation = 'full' acts only in "
                      f"the rod model it was trained in; one trained on 'sensors' acts in both)")
-    mismatch = action_map_mismatch(getattr(policy, "trained_task", {}), task)
-    if mismatch:
-        parser.error(f"--policy {args.policy} was trained on a task whose actions act otherwise: {mismatch}; "
-                     f"evaluate it with the settings (--touching-closing-rate, --approach-slowing-gap) and the "
-                     f"version of the package it was trained with")
+    try:
+        check_action_map(policy, task)
+    except ValueError as error:
+        parser.error(f"--policy {args.policy}: {error} (--touching-closing-rate, --approach-slowing-gap)")
     result = evaluate(policy, args.episodes, args.seed, num_envs=args.num_envs, model=args.model,
                       observation=observation, **reflexes)
     result.update(policy=args.policy, model=args.model, observation=observation, **reflexes)

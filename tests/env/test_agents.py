@@ -165,14 +165,16 @@ def test_the_pressure_warning_ramp_sets_each_rollouts_weight():
 def test_the_shipped_policy_loads_and_beats_random(model):
     """agents/pretrained holds a PPO policy (model, statistics and config) trained on the sensors' observation: it
     acts in both rod models and, on 8 seeds no training or tuning saw, succeeds where random actions do not."""
-    from agents.evaluate import PRETRAINED, evaluate, make_policy
+    from agents.evaluate import PRETRAINED, REFLEXES, evaluate, make_policy
 
     assert {"ppo_model.zip", "vecnormalize.pkl", "config.json"} <= {path.name for path in PRETRAINED.iterdir()}
     assert sum(path.stat().st_size for path in PRETRAINED.iterdir()) < 2_000_000  # small enough to ship
     task = GraspTask(model=model, observation="sensors")
     pretrained = make_policy("pretrained", task, 0)
     assert pretrained.observation == "sensors"
-    trained = evaluate(pretrained, 8, 40_000, progress=False, num_envs=8, model=model, observation="sensors")
+    reflexes = {name: pretrained.trained_task[name] for name in REFLEXES}  # the reflexes it was trained with
+    trained = evaluate(pretrained, 8, 40_000, progress=False, num_envs=8, model=model, observation="sensors",
+                       **reflexes)
     random = evaluate(RandomPolicy(task, 0), 8, 40_000, progress=False, num_envs=8, model=model,
                       observation="sensors")
     assert trained["success_rate"] >= 0.5 > random["success_rate"]
@@ -413,7 +415,7 @@ def test_evaluate_runs_a_policy_only_with_the_closing_reflexes_it_was_trained_wi
     refused by name."""
     import shutil
 
-    from agents.evaluate import action_map_mismatch
+    from agents.evaluate import action_map_mismatch, evaluate, load_ppo
 
     config = json.loads((ROOT / "agents" / "pretrained" / "config.json").read_text())
     assert config["task"]["touching_closing_rate"] is None  # the shipped policy, trained without a bound
@@ -433,6 +435,8 @@ def test_evaluate_runs_a_policy_only_with_the_closing_reflexes_it_was_trained_wi
     folder = tmp_path / "policy"
     shutil.copytree(ROOT / "agents" / "pretrained", folder)
     (folder / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match=r"touching_closing_rate = 0.04 \(today None\)"):  # the Python API too
+        evaluate(load_ppo(folder), 1, progress=False, model="planar", observation="sensors")
     out = run_script("-m", "agents.evaluate", "--policy", str(folder), "--episodes", "1", "--model", "planar",
                      "--touching-closing-rate", "0.05")
     assert out.returncode == 2 and "touching_closing_rate = 0.04 (today 0.05)" in out.stderr, out.stderr
