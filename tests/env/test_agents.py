@@ -394,12 +394,13 @@ def test_evaluate_refuses_a_policy_trained_on_another_action_map(tmp_path):
     agents.evaluate names the setting and both values instead of evaluating it."""
     import shutil
 
-    from agents.evaluate import action_map_mismatch
+    from agents.evaluate import REFLEXES, action_map_mismatch
 
     folder = tmp_path / "policy"
     shutil.copytree(ROOT / "agents" / "pretrained", folder)
     config = json.loads((folder / "config.json").read_text())
-    assert action_map_mismatch(config["task"], GraspTask()) is None  # the shipped policy fits today's task
+    reflexes = {name: config["task"].get(name) for name in REFLEXES}
+    assert action_map_mismatch(config["task"], GraspTask(**reflexes)) is None  # the shipped policy fits today's task
     config["task"]["max_curvature_rate"] = 0.5
     config["task"]["curvature_range"] = [-0.25, 0.0]
     (folder / "config.json").write_text(json.dumps(config))
@@ -411,14 +412,14 @@ def test_evaluate_refuses_a_policy_trained_on_another_action_map(tmp_path):
 def test_evaluate_runs_a_policy_only_with_the_closing_reflexes_it_was_trained_with(tmp_path):
     """The closing reflexes (a touching finger's bound, the approach's slowing gap) are part of what an action does:
     a policy trained with them runs with them, from its config.json when the command line does not give them, and
-    is refused with others (the shipped one, trained without, is refused with them); a bound out of range is
-    refused by name."""
+    is refused with others (the shipped one too); a bound out of range is refused by name."""
     import shutil
 
     from agents.evaluate import action_map_mismatch, evaluate, load_ppo
 
     config = json.loads((ROOT / "agents" / "pretrained" / "config.json").read_text())
-    assert config["task"]["touching_closing_rate"] is None  # the shipped policy, trained without a bound
+    shipped_rate = config["task"]["touching_closing_rate"]
+    config["task"].update(touching_closing_rate=None, approach_slowing_gap=None)  # a policy trained without them
     assert "touching_closing_rate = None (today 0.04)" in action_map_mismatch(
         config["task"], GraspTask(touching_closing_rate=0.04))
     before = {key: value for key, value in config["task"].items() if key != "touching_closing_rate"}
@@ -454,7 +455,7 @@ def test_evaluate_runs_a_policy_only_with_the_closing_reflexes_it_was_trained_wi
                 "--approach-slowing-gap 0.01" in out.stdout) == (not given)
     out = run_script("-m", "agents.evaluate", "--policy", "pretrained", "--episodes", "1", "--model", "planar",
                      "--approach-slowing-gap", "0.01", "--touching-closing-rate", "0.04")
-    assert out.returncode == 2 and "touching_closing_rate = None (today 0.04)" in out.stderr, out.stderr
+    assert out.returncode == 2 and f"touching_closing_rate = {shipped_rate!r} (today 0.04)" in out.stderr, out.stderr
     out = run_script("-m", "agents.evaluate", "--policy", "reactive", "--episodes", "1",
                      "--touching-closing-rate", "0")
     assert out.returncode == 2 and "--touching-closing-rate = 0.0 1/s is outside the allowed range" in out.stderr
