@@ -146,18 +146,18 @@ class GraspTask:
     touching_closing_rate: float | None = None
     """The fastest a finger that touches the specimen (:attr:`GraspBatch.touching`, as the observation reads it
     at the start of the control interval) closes [1/s], whatever its action asks; opening is never bounded. None
-    (the default): no bound. It is the reactive controller's own rule made a reflex of the gripper. The shipped
-    policy closes too fast once it touches: with its actions floored at −0.5 (0.038 1/s) once a finger touches, it
-    kept its success (0.88 against 0.80 on 64 tuning seeds) and its mean peak force fell from 4.0 to 2.2 N
-    (docs/ppo_experiments.md). A policy trained with a bound must be run with the same one."""
+    (the default): no bound, so the env and its baselines are without it. It is the reactive controller's own rule
+    made a reflex of the gripper. ``agents.train_ppo`` trains with 0.15 1/s (and a 1 cm
+    :attr:`approach_slowing_gap`): with them PPO holds more gently than the controller and more often
+    (docs/environment.md, *PPO*). A policy trained with a bound must be run with the same one."""
     approach_slowing_gap: float | None = None
     """Within this gap [m] of the specimen (:attr:`GraspBatch.finger_gap` at the start of the control interval)
     a finger that does not touch closes at most at a rate falling linearly with its gap, from
     ``max_curvature_rate`` at this gap to ``touching_closing_rate`` in contact; needs ``touching_closing_rate``.
     None (the default): no slowing. It is the reactive controller's approach (slowing within 1 cm) made a reflex,
     and the controller acts the same with it. Both reflexes on a policy trained without them trade success for
-    force; PPO trained with them (0.065 1/s and 1 cm) held the specimen tighter (docs/ppo_experiments.md), so
-    neither is the default. A policy trained with it must be run with the same gap."""
+    force, and PPO trained with them holds tighter unless the reward's pressure warning grows (weight 12 in
+    ``agents.train_ppo``; docs/ppo_experiments.md). A policy trained with it must be run with the same gap."""
     curvature_range: tuple[float, float] = (-0.2, 0.0)
     """Range of κ̄ (dimensionless) the actuators reach: κ̄ saturates there, as a pneumatic finger saturates at its
     maximum pressure (−0.2: each finger's natural shape curls through about 205°) and is straight without

@@ -114,6 +114,7 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     assert config["torch_threads"] == torch.get_num_threads()  # needed to reproduce the run bit for bit
     assert config["pressure_ramp"] == {"initial": 1.0, "final": train_ppo.FINAL_PRESSURE_WEIGHT,
                                        "start_steps": 200_000, "end_steps": 400_000}
+    assert {name: config["task"][name] for name in train_ppo.TRAINING_REFLEXES} == train_ppo.TRAINING_REFLEXES
     assert (tmp_path / "vecnormalize.pkl").exists() and (tmp_path / "ppo_model.zip").exists()
     assert any((tmp_path / "tensorboard").rglob("events.out.tfevents.*"))
     assert (tmp_path / "learning_curve.png").stat().st_size > 5000
