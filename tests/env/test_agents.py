@@ -378,7 +378,8 @@ def test_scripts_reject_bad_arguments(tmp_path):
     out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "bound"), "--touching-closing-rate", "-1")
     assert out.returncode == 2 and "--touching-closing-rate = -1.0 1/s is outside the allowed range" in out.stderr
     assert not (tmp_path / "bound").exists()  # refused before anything is written
-    out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "bound"), "--approach-slowing-gap", "0.01")
+    out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "bound"), "--approach-slowing-gap", "0.01",
+                     "--touching-closing-rate", "none")
     assert out.returncode == 2 and "--approach-slowing-gap = 0.01 m slows the approach to --touching-closing-rate, " \
         "which must then be set" in out.stderr, out.stderr
     assert not (tmp_path / "bound").exists()
