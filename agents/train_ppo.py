@@ -203,7 +203,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, required=True, help="folder for the model, statistics, config and logs")
     parser.add_argument("--timesteps", type=int, default=600_000,
-                        help="env steps (default 600,000: about 25 minutes in the planar model on 2 cores)")
+                        help="env steps (default 600,000: about 30 minutes in the planar model on 2 cores, alone)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--num-envs", type=int, default=32)
     parser.add_argument("--num-threads", type=int, default=2,
