@@ -153,7 +153,7 @@ def trained_task(model_dir: Path) -> dict:
 ACTION_MAP = ("control_dt", "max_curvature_rate", "action_exponent", "curvature_range", "touching_closing_rate",
               "approach_slowing_gap")
 """The task's settings that say what an action does: a policy trained with other values would act wrongly, not
-differently, so :func:`main` refuses it."""
+differently, so :func:`check_action_map` refuses it (for :func:`evaluate` and :func:`main`)."""
 
 
 def action_map_mismatch(trained_task: dict, task: GraspTask) -> str | None:

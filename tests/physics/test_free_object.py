@@ -268,7 +268,8 @@ def test_fingers_close_on_a_free_capsule():
     squeezed out along its axis: fingers off for 70+ steps, 0.24 m away). The grip's details are chaotic: moving the
     capsule by 1e-12 m turns a one-step lapse of one finger's contact at 1.14 s into none (and with 2026-12-03's
     NumPy 2.4.6 / Numba 0.68.1 that lapse is there), so the test bounds the hold rather than asking for every step;
-    after 1.2 s the squeeze-out starts at a time that depends on rounding, and the end is not checked."""
+    after 1.2 s the squeeze-out starts at a time that depends on rounding, so to 1.5 s only each step's contact is
+    checked, not the hold."""
     from test_contact import segment_distance
 
     capsule = Capsule(0.04, (0.0, -0.05, -0.1), (0.0, 0.05, -0.1), density=1100.0, friction=0.6)
@@ -278,7 +279,7 @@ def test_fingers_close_on_a_free_capsule():
     start = state.body_position[0].copy()
     slid = 0
     finger_holds = []
-    for step in range(120):
+    for step in range(150):
         result = sim.step(state, max(-0.6 * state.time, -0.25))
         assert result.converged.all() and result.contact.resolved.all()
         slid += int(result.contact.sliding.sum())
@@ -291,7 +292,7 @@ def test_fingers_close_on_a_free_capsule():
         np.testing.assert_allclose(distance[stuck], capsule.radius, atol=1e-9)
         np.testing.assert_allclose(distance[result.contact.sliding[0]], capsule.radius, atol=1e-5)
         assert np.all(result.contact.normal_reaction[state.held] >= 0)
-        if step >= 40:
+        if 40 <= step < 120:
             finger_holds.append(state.held[0].any(axis=1))
             assert np.linalg.norm(state.body_position[0] - start) <= 0.04, step
     assert slid > 0
