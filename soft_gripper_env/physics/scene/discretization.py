@@ -75,7 +75,8 @@ class Discretization:
         return self.n_nodes * self.stride
 
     def world_positions(self, q: np.ndarray) -> np.ndarray:
-        """World node positions [m], (B, F, N, 3), from coordinates ``q`` of shape (B, F, N, S)."""
+        """World node positions [m], (..., B, F, N, 3), from coordinates ``q`` of shape (..., B, F, N, S): a batch,
+        or any leading axes before it (a run's steps)."""
         if self.model == "3d":
             return q[..., :3].copy()
         d = self.finger_directions  # (F, 3)
