@@ -336,6 +336,9 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
         admissible_rotation(coupling.basis[b], coupling.motion.rotation[b])
     for it in range(solver.max_iterations + 1):
         largest = 0.0
+        # after a Newton step the residual usually meets the tolerance: the test assembles forces alone, and the
+        # matrices of what iterates on come after it (the same forces again, so the arithmetic is as before)
+        matrices = it == 0
         if coupling is not None:
             motion = coupling.motion
             turned(motion.rotation[b], motion.old.orientation[b], work.rotation, motion.orientation[b])
@@ -349,7 +352,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
                                   work.body_residual)
             rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds, coupling,
                                                 residual[first + f], x0[f], largest, bands[f], scratch, work.normals[f],
-                                                work.basis)
+                                                work.basis, matrices)
             if coupling is None and rubbing[f]:
                 if it > 0:  # back off a step that made the rod's residual worse
                     halving = 0
@@ -358,7 +361,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
                         _back_off_rod(first + f, q, work.rod_delta[f], 0.5**halving)
                         rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds,
                                                             coupling, residual[first + f], x0[f], largest, bands[f],
-                                                            scratch, work.normals[f], work.basis)
+                                                            scratch, work.normals[f], work.basis, matrices)
                 last_ratio[f] = rod_ratio[f]
             if coupling is not None:
                 if touching[f]:
@@ -384,6 +387,9 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
             return
         for f in range(n_fingers):
             if active[f]:
+                if not matrices:
+                    _rod_equations(first + f, q, step, rods, terms, solver, measured, holds, residual[first + f],
+                                   x0[f], 0.0, bands[f], scratch, work.normals[f], work.basis, True)
                 band = work.bands[f]
                 diagonal = band.shape[1] - 1
                 for j in range(band.shape[0]):
@@ -418,13 +424,23 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _rod_system(r, q, step, rods, terms, solver, measured, holds, coupling, residual, right_hand_side, largest, band,
-                scratch, normals, basis):
+                scratch, normals, basis, matrix):
     """Rod r's Newton system at ``q``: its sliding nodes put onto a fixed object's surface, then
-    :func:`_rod_residual` and :func:`_slide_rows`. Returns the rod's largest scaled residual and ``largest``."""
+    :func:`_rod_equations`. Returns the rod's largest scaled residual and ``largest``."""
     if holds is not None and coupling is None:
         _slide_on_fixed_object(r, q, holds, normals)
+    return _rod_equations(r, q, step, rods, terms, solver, measured, holds, residual, right_hand_side, largest, band,
+                          scratch, normals, basis, matrix)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _rod_equations(r, q, step, rods, terms, solver, measured, holds, residual, right_hand_side, largest, band, scratch,
+                   normals, basis, matrix):
+    """Rod r's residual and right-hand side at ``q`` as it is, and its Newton matrix when ``matrix`` (else the band
+    holds only the external forces' part): :func:`_rod_residual`, then :func:`_slide_rows`. Returns the rod's
+    largest scaled residual and ``largest``."""
     own, largest = _rod_residual(r, q, step, rods, terms, solver, measured, residual, right_hand_side, largest, band,
-                                 scratch)
+                                 scratch, matrix)
     if holds is not None:
         own, largest = _slide_rows(r, holds, normals, residual, right_hand_side, band, solver.tolerance_inverse, own,
                                    largest, basis)
@@ -594,15 +610,16 @@ def _unrotate_steps(first_rod, holds, work):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_side, largest, band, scratch):
+def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_side, largest, band, scratch, matrix):
     """Assembles rod r and writes its residual (n,) into ``residual`` and its negation, the Newton step's right-hand
-    side, into ``right_hand_side`` (n,), its Newton matrix into ``band`` (n, kd+1); ``scratch`` holds the work arrays
+    side, into ``right_hand_side`` (n,), its Newton matrix into ``band`` (n, kd+1) (the elastic part when ``matrix``:
+    the forces do not depend on it); ``scratch`` holds the work arrays
     force (N, S), velocity and acceleration (N, D). Returns the rod's largest scaled residual and ``largest``
     updated with it (NaN is caught: it never compares as small)."""
     # the caller passes rows and work arrays it took out of their bundles once per solve: this runs once per rod and
     # Newton iteration, and each bundle member or array view read here would cost an atomic reference count
     force, velocity, acceleration = scratch
-    assemble_rod(r, q, step, rods, terms, True, force, band, velocity, acceleration)
+    assemble_rod(r, q, step, rods, terms, matrix, force, band, velocity, acceleration)
     own = 0.0
     mass_term, tolerance_inverse, q_pred = solver.mass_term, solver.tolerance_inverse, step.q_pred
     n_nodes, stride = force.shape
