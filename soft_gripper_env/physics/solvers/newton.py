@@ -336,9 +336,11 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
         admissible_rotation(coupling.basis[b], coupling.motion.rotation[b])
     for it in range(solver.max_iterations + 1):
         largest = 0.0
-        # after a Newton step the residual usually meets the tolerance: the test assembles forces alone, and the
-        # matrices of what iterates on come after it (the same forces again, so the arithmetic is as before)
-        matrices = it == 0
+        # in 3-D, after a Newton step the test assembles the forces alone and the matrices of what iterates on
+        # come after it (the same forces again: the arithmetic is as before). A step usually meets the tolerance
+        # there, and the elastic Hessian costs 1.7 times the forces; the planar one costs a third of them, so a
+        # test that fails (while grasping, often) would cost more than the matrices it saves
+        matrices = it == 0 or q.shape[2] == 2
         if coupling is not None:
             motion = coupling.motion
             turned(motion.rotation[b], motion.old.orientation[b], work.rotation, motion.orientation[b])
