@@ -162,6 +162,20 @@ def test_3d_gradient_and_hessian(seed):
     np.testing.assert_allclose(hess, energy_hessian_fd(rod, 2e-4), rtol=0, atol=1e-5 * np.abs(hess).max())
 
 
+@pytest.mark.parametrize("rod_kind", [PlanarRod, Rod3D])
+def test_forces_do_not_depend_on_assembling_the_hessian(rod_kind):
+    """Newton's convergence test assembles the forces alone and the matrix only when it iterates on
+    (solvers/newton.py), which keeps trajectories bitwise only if the forces and energy come out the same bits either
+    way."""
+    for seed in range(3):
+        rod = rod_kind(np.random.default_rng(10 + seed))
+        energy, grad, hess = rod.evaluate(rod.q, True)
+        energy_alone, grad_alone, hess_alone = rod.evaluate(rod.q, False)
+        assert np.abs(hess).max() > 0.0 and not hess_alone.any()  # the flag does skip the matrix
+        assert energy_alone == energy
+        np.testing.assert_array_equal(grad_alone, grad)
+
+
 @pytest.mark.parametrize("model", ["planar", "3d"])
 @pytest.mark.parametrize("force_model", [StokesDrag(viscosity=0.7), MassProportionalDamping(rate=3.0)])
 def test_velocity_force_jacobian(model, force_model):
