@@ -2,6 +2,7 @@
 reference-count benchmark's reading of gdb (benchmarks/refcounts.py) and the grasp-outcome study's scoring
 (benchmarks/speed_vs_error.py)."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -9,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.compare_commits import higher_is_faster, measurements
+from benchmarks.compare_commits import higher_is_faster, measurements, paired_case, run_benchmark
 from benchmarks.refcounts import hits
 from benchmarks.speed_vs_error import (
     OUTCOME_DEFAULT,
@@ -68,6 +69,75 @@ def test_compare_commits_refuses_an_unknown_base():
                          capture_output=True, text=True, timeout=120)
     assert out.returncode != 0
     assert "--base 'no-such-commit' is not a commit" in out.stderr
+
+
+PROBE = """
+import argparse, json, time
+parser = argparse.ArgumentParser()
+for flag in ("--repeats", "--json", "--plot"):
+    parser.add_argument(flag)
+args = parser.parse_args()
+start_cpu, start = time.process_time(), time.perf_counter()
+time.sleep(0.2)
+json.dump({"slept_s": time.perf_counter() - start, "cpu_s": time.process_time() - start_cpu}, open(args.json, "w"))
+"""
+
+
+@pytest.mark.parametrize("clock", ["wall", "cpu"])
+def test_compare_commits_times_each_tree_by_the_clock_asked_for(tmp_path, clock):
+    """A benchmark that sleeps 0.2 s takes 0.2 s of wall time and almost no CPU time; the old commit's scripts read
+    whichever clock through time.perf_counter."""
+    (tmp_path / "tree" / "benchmarks").mkdir(parents=True)
+    (tmp_path / "tree" / "benchmarks" / "probe.py").write_text(PROBE)
+    result = run_benchmark(tmp_path / "tree", "probe", 1, tmp_path, clock)
+    if clock == "wall":
+        assert result["slept_s"] >= 0.2
+    else:
+        assert result["slept_s"] < 0.1
+        assert result["slept_s"] == pytest.approx(result["cpu_s"], abs=0.02)
+
+
+FAKE_PHYSICS = """
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+HERE = Path(__file__).parent
+WARM_UP_S, RUN_S = {warm_up}, {run}
+
+
+def paper_scene(model):
+    return SimpleNamespace(n_steps=100)
+
+
+def run_ramp(scene, batch_size):
+    with open(HERE / "calls.txt", "a") as calls:
+        calls.write(f"{{time.time()}}\\n")
+    first = (HERE / "calls.txt").read_text().count("\\n") == 1
+    end = time.process_time() + (WARM_UP_S if first else RUN_S * batch_size)
+    while time.process_time() < end:  # busy: CPU time, as the paired runs measure it
+        pass
+"""
+
+
+def test_paired_runs_start_timing_together_and_report_per_gripper_step(tmp_path):
+    """Two fake trees whose warm-ups differ by 1 s: their timed runs still start together, and a tree whose run
+    costs twice as much reads as half the speed, in µs per gripper-step."""
+    trees = {}
+    for side, warm_up, run in (("base", 1.0, 0.005), ("this", 0.0, 0.01)):
+        package = tmp_path / side / "soft_gripper_env" / "physics"
+        package.mkdir(parents=True)
+        (package.parent / "__init__.py").write_text("")
+        (package / "__init__.py").write_text(FAKE_PHYSICS.format(warm_up=warm_up, run=run))
+        trees[side] = tmp_path / side
+    cpus = sorted(os.sched_getaffinity(0))
+    values = paired_case(trees, {"base": cpus[0], "this": cpus[-1]}, "batched_planar_us_per_gripper_step[16]",
+                         3, "cpu")
+    assert values["base"] == pytest.approx(0.005 / 100 * 1e6, rel=0.2)  # 0.005 s per gripper for 100 steps
+    assert values["this"] == pytest.approx(0.01 / 100 * 1e6, rel=0.2)
+    starts = {side: float((tree / "soft_gripper_env" / "physics" / "calls.txt").read_text().split()[1])
+              for side, tree in trees.items()}
+    assert abs(starts["base"] - starts["this"]) < 0.5
 
 
 def test_refcounts_reads_each_breakpoints_hits_from_gdb_and_refuses_output_without_both():
