@@ -45,14 +45,14 @@ class _ModelDefault:
 
 
 MODEL_DEFAULT = _ModelDefault()
-MODEL_DEFAULTS = {"3d": {"physics_dt": 0.0025, "friction_passes": None},
+MODEL_DEFAULTS = {"3d": {"physics_dt": 0.0025, "friction_passes": 4},
                   "planar": {"physics_dt": 0.005, "friction_passes": 2}}
 """Each rod model's default physics step [s] and cap on friction's re-solves (:class:`GraspTask`), at Newton's
 relative tolerance 1e-4. In 3-D: a setting whose grasp outcomes agree with a fine reference (3-D, Δt 2.5 ms,
-tolerance 1e-9, friction settled) on 200 seeds under both scripted controllers: Δt 2.5 ms with friction settled,
-the reactive controller's success labels on 95.0 % of seeds and the sphere's final place a median 1.1 mm apart.
-Two friction passes at 2.5 ms agree on 94.0 % (2.6 mm), 5 ms with them on 92.0 % (4.7 mm); three and four passes
-(measured after this default was chosen) agree on 95.0 % and 95.5 % and grasp 1.6 and 1.5 times faster.
+tolerance 1e-9, friction settled) on 200 seeds under both scripted controllers: Δt 2.5 ms with at most four
+friction passes, the reactive controller's success labels on 95.5 % of seeds and the sphere's final place a median
+1.7 mm apart, grasping about 1.5 times as fast as with friction settled (95.0 %, 1.1 mm), the default before it.
+Three passes agree on 95.0 % (2.2 mm), two on 94.0 % (2.6 mm), 5 ms with two on 92.0 % (4.7 mm).
 The planar model disagrees with the 3-D reference on about a fifth of those labels at every step from 5 to 25 ms:
 its error is the model's, not the step's, so it keeps the faster setting that PPO trains in, 5 ms with two
 friction passes (``docs/speed_vs_error.md``)."""
@@ -125,11 +125,11 @@ class GraspTask:
     friction_passes: int | None = MODEL_DEFAULT
     """The corrector's re-solves per physics step in which a sliding node's moved friction alone solves again
     (:attr:`~.physics.scene.objects.ContactSettings.friction_passes`); None settles friction within the whole
-    budget. By default the rod model's (:data:`MODEL_DEFAULTS`: settled in 3-D, two passes planar), set at
-    construction. Two passes make a grasping env step about 1.4× faster (a quarter of its physics steps otherwise
-    spend the corrector's whole budget cycling on friction), but in 3-D at 2.5 ms they move the grasp's outcome:
-    the reactive controller's labels agree with the fine reference on 94.0 % of seeds with them and 95.0 % without
-    (``docs/speed_vs_error.md``)."""
+    budget. By default the rod model's (:data:`MODEL_DEFAULTS`: four passes in 3-D, two planar), set at
+    construction. Without a cap, about a quarter of a grasp's physics steps spend the corrector's whole budget
+    cycling on friction; four passes make a 3-D grasping env step about 1.5× faster and keep the grasp's outcome
+    (the reactive controller's labels agree with the fine reference on 95.5 % of seeds), two would be faster still
+    but move it (94.0 %; ``docs/speed_vs_error.md``)."""
     max_curvature_rate: float = 0.3
     """Natural-curvature rate of an action of ±1 [1/s] (κ̄ per node at the gripper's 20 nodes per finger): the
     fastest closing. 0.3 1/s is the slowest approach that still catches the drifting specimen (the reactive
