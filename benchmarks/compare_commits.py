@@ -264,35 +264,43 @@ def main(argv: list[str] | None = None) -> dict:
     args.json.write_text(json.dumps(results, indent=2) + "\n")
     print(f"wrote {args.json}")
 
+    plot_ratios(results, args.plot)
+    return results
+
+
+def plot_ratios(results: dict, path: Path) -> None:
+    """One bar per measurement: the median of the single rounds' speed ratios, their range as whiskers, the best-of
+    ratio as a diamond and its value at the right; from :func:`main`'s results (its JSON)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
-    fig, ax = plt.subplots(figsize=(8, 0.45 * len(rows) + 1.5))
+    rows = results["rows"]
+    fig, ax = plt.subplots(figsize=(9, 0.45 * len(rows) + 1.8))
     labels = [row["measurement"] for row in rows]
     medians = np.array([row["median_round_ratio"] for row in rows])
-    spread = np.array([[row["median_round_ratio"] - min(row["round_ratios"]),
-                        max(row["round_ratios"]) - row["median_round_ratio"]] for row in rows])
-    bars = ax.barh(labels, medians, xerr=spread.T, capsize=3, error_kw={"lw": 1},
-                   color=["tab:green" if r >= 0.95 else "tab:red" for r in medians], label="median of single rounds")
-    ax.bar_label(bars, fmt="%.3f×", padding=12, fontsize=8)
+    low = medians - np.array([min(row["round_ratios"]) for row in rows])
+    high = np.array([max(row["round_ratios"]) for row in rows]) - medians
+    ax.barh(labels, medians, xerr=(low, high), capsize=3, error_kw={"lw": 1},
+            color=["tab:green" if r >= 0.95 else "tab:red" for r in medians], label="median of single rounds")
     ax.plot([row["speed_ratio"] for row in rows], labels, "kD", ms=4, label="best of all rounds")
     ax.axvline(1.0, color="k", lw=1)
     ax.axvline(0.95, color="0.5", ls="--", lw=1, label="5 % slower")
-    low, high = spread[:, 0], spread[:, 1]
-    ax.set_xlim(min(0.8, (medians - low).min() - 0.05), max(1.15, (medians + high).max() + 0.1))
-    how = "paired runs, " if args.paired else ""
-    ax.set_xlabel(f"speed of this tree / speed of {base_commit[:10]} ({how}{args.clock} time; whiskers: range of "
-                  f"{args.rounds} rounds)")
+    right = max(1.15, (medians + high).max() + 0.25)
+    ax.set_xlim(min(0.8, (medians - low).min() - 0.05), right)
+    for y, median in enumerate(medians):  # past every whisker, so no label sits on one
+        ax.text(right - 0.01, y, f"{median:.3f}×", va="center", ha="right", fontsize=8)
+    how = "paired runs, " if results.get("paired") else ""
+    ax.set_xlabel(f"speed of this tree ({results['head'][:10]}) / speed of {results['base'][:10]}\n"
+                  f"({how}{results.get('clock', 'wall')} time; whiskers: the range of {results['rounds']} rounds)")
     ax.invert_yaxis()
-    ax.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=3, fontsize=8, frameon=False)
     fig.tight_layout()
-    args.plot.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.plot, dpi=110)
-    print(f"wrote {args.plot}")
-    return results
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

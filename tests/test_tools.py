@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.compare_commits import higher_is_faster, measurements, paired_case, run_benchmark
+from benchmarks.compare_commits import higher_is_faster, measurements, paired_case, plot_ratios, run_benchmark
 from benchmarks.refcounts import hits
 from benchmarks.speed_vs_error import (
     OUTCOME_DEFAULT,
@@ -138,6 +138,16 @@ def test_paired_runs_start_timing_together_and_report_per_gripper_step(tmp_path)
     starts = {side: float((tree / "soft_gripper_env" / "physics" / "calls.txt").read_text().split()[1])
               for side, tree in trees.items()}
     assert abs(starts["base"] - starts["this"]) < 0.5
+
+
+def test_compare_commits_plots_the_rounds_it_ran(tmp_path):
+    results = {"base": "a" * 40, "head": "b" * 40, "rounds": 2, "clock": "cpu", "paired": True,
+               "rows": [{"measurement": "seed_scene_planar_s", "speed_ratio": 1.02, "round_ratios": [0.97, 1.05],
+                         "median_round_ratio": 1.01},
+                        {"measurement": "batched_planar_us_per_gripper_step[64]", "speed_ratio": 0.9,
+                         "round_ratios": [0.88, 0.93], "median_round_ratio": 0.905}]}
+    plot_ratios(results, tmp_path / "ratios.png")
+    assert (tmp_path / "ratios.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_refcounts_reads_each_breakpoints_hits_from_gdb_and_refuses_output_without_both():
