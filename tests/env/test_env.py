@@ -27,8 +27,11 @@ from soft_gripper_env.grasp_task import MODEL_DEFAULTS, GraspTask
 from soft_gripper_env.physics import PAPER_BALL, NewtonSettings, paper_scene, run_ramp
 from soft_gripper_env.physics import simulator as simulator_module
 
-SUCCESS_SEED = 1
-"""A seed the reactive controller takes (it succeeds on about three seeds in four)."""
+SUCCESS_SEED = 2
+"""A seed the reactive controller takes in both rod models at their defaults (it succeeds on about three seeds in
+four; seed 1, used before, failed in 3-D once friction was capped at four passes)."""
+BELOW_LIMIT_SEED = 1
+"""A seed on which the reactive controller's planar grip stays below the specimen's fragility limit."""
 
 ENV_ID = soft_gripper_env.ENV_ID
 
@@ -558,7 +561,7 @@ def test_the_pressure_penalty_grows_from_its_onset_to_the_limit(onset):
     control interval, at every step of a reactive grasp, which pays it only for onsets below its grip's load."""
     env = SoftGripperUnderwaterEnv(model="planar", pressure_onset=onset)
     policy = ReactivePolicy(env.task)
-    obs, _ = env.reset(seed=SUCCESS_SEED)
+    obs, _ = env.reset(seed=BELOW_LIMIT_SEED)
     terms, loads = [], []
     for _ in range(60):
         obs, _, terminated, truncated, info = env.step(policy(obs))
