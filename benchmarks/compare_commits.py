@@ -269,8 +269,8 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 def plot_ratios(results: dict, path: Path) -> None:
-    """One bar per measurement: the median of the single rounds' speed ratios, their range as whiskers, the best-of
-    ratio as a diamond and its value at the right; from :func:`main`'s results (its JSON)."""
+    """One bar per measurement: the median of the single rounds' speed ratios, written at the right, their range as
+    whiskers and the best-of ratio as a diamond; from :func:`main`'s results (its JSON)."""
     import matplotlib
 
     matplotlib.use("Agg")
