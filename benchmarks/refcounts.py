@@ -11,6 +11,14 @@ It runs the paper's scene (3 fingers, N = 20, no object) through the simulator i
 the arguments of ``--calls`` of its calls of the step kernel (``simulator.advance_rods``, spread over the run), calls
 the kernel with them once to warm up, and then counts, with a breakpoint on each, how often ``NRT_incref`` and
 ``NRT_decref`` run while it calls the kernel with them again. Needs gdb.
+
+    python -m benchmarks.refcounts --env MODEL [--steps 1] [--json out/refcounts_env.json]
+
+counts them instead over whole steps of the environment (``SoftGripperUnderwater-v0`` in ``MODEL``, random actions
+after a dozen), each a control interval of physics steps in one compiled call with the free sphere and the
+corrector, and says which compiled function makes them: a breakpoint reads each operation's return address, which
+falls in a function of the control interval's machine code (a function that Numba or LLVM has inlined counts as its
+caller). That shows where a step's reference counts are worth removing. Needs gdb and readelf.
 """
 
 from __future__ import annotations
@@ -54,6 +62,129 @@ for args in chosen:
     kernel(*args)
 os.kill(os.getpid(), signal.SIGUSR1)
 """
+
+_ENV_CHILD = ISOLATE + """
+import os, signal
+sys.path[:0] = [tree]
+model, steps, address_file, object_file = sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5]
+os.environ.setdefault('NUMBA_NUM_THREADS', '1')
+import numba.core.codegen as codegen
+objects = []  # each library's machine code as Numba loads it (from its cache, or compiled)
+set_compiled_object = codegen.CPUCodeLibrary._set_compiled_object
+def keep(library, value):
+    objects.append((library, bytes(value)))
+    return set_compiled_object(library, value)
+codegen.CPUCodeLibrary._set_compiled_object = keep
+from pathlib import Path
+import gymnasium as gym
+from numba.core.runtime import rtsys
+import soft_gripper_env
+from soft_gripper_env.physics.solvers import stepping
+from benchmarks.refcounts import function_symbols
+env = gym.make(soft_gripper_env.ENV_ID, model=model)
+env.action_space.seed(0)
+env.reset(seed=0)
+for _ in range(12):
+    env.step(env.action_space.sample())
+(result,) = stepping.take_steps.overloads.values()
+code = [value for owner, value in objects if owner is result.library]
+if not code:  # compiled in this process rather than loaded from the cache: the library holds it
+    code = [bytes(result.library._get_compiled_object())]
+Path(object_file).write_bytes(code[-1])
+symbols = function_symbols(Path(object_file))
+# the object's code lies at its entry point's address less that function's offset in it; the object links in its
+# own copies of NRT_incref and NRT_decref, which its code calls rather than the runtime's
+name = result.fndesc.llvm_func_name
+base = result.library.get_pointer_to_function(name) - symbols[name][0]
+targets = [rtsys.library.get_pointer_to_function(n) for n in ('NRT_incref', 'NRT_decref')]
+targets += [base + symbols[n][0] for n in ('NRT_incref', 'NRT_decref') if n in symbols]
+Path(address_file).write_text(' '.join(str(a) for a in [base] + targets))
+os.kill(os.getpid(), signal.SIGUSR1)
+for _ in range(steps):
+    env.step(env.action_space.sample())
+os.kill(os.getpid(), signal.SIGUSR1)
+"""
+
+_ENV_GDB = """set pagination off
+handle SIGUSR1 stop nopass
+run
+python
+import collections, json
+base, *targets = [int(a) for a in open({address_file!r}).read().split()]
+returns = collections.Counter()
+class Count(gdb.Breakpoint):
+    def stop(self):
+        stack = int(gdb.parse_and_eval('$rsp'))
+        returns[int.from_bytes(bytes(gdb.selected_inferior().read_memory(stack, 8)), 'little') - base] += 1
+        return False
+breakpoints = [Count('*%d' % t) for t in targets]
+end
+continue
+python
+json.dump(sorted(returns.items()), open({counts_file!r}, 'w'))
+end
+kill
+quit
+"""
+
+
+def demangle(name: str) -> str:
+    """The dotted name of a Numba-compiled function from its mangled symbol (``_ZN`` and length-prefixed parts up
+    to Numba's ``B`` or ``E``), less the package's prefix: ``kernels.contact.contact_reactions``."""
+    if not name.startswith("_ZN"):
+        return name
+    parts, i = [], 3
+    while i < len(name) and name[i].isdigit():
+        j = i
+        while name[j].isdigit():
+            j += 1
+        length = int(name[i:j])
+        parts.append(name[j:j + length])
+        i = j + length
+    while parts and parts[0] in ("soft_gripper_env", "physics"):
+        parts.pop(0)
+    return ".".join(parts) or name
+
+
+def function_symbols(object_code: Path) -> dict[str, tuple[int, int]]:
+    """The functions an ELF object defines, name → (offset, size) [bytes], as ``readelf`` lists them."""
+    listing = subprocess.run(["readelf", "-sW", str(object_code)], capture_output=True, text=True, check=True).stdout
+    symbols = {}
+    for line in listing.splitlines():
+        fields = line.split()
+        if len(fields) >= 8 and fields[3] == "FUNC" and fields[6] != "UND":
+            symbols[fields[7]] = (int(fields[1], 16), int(fields[2]))
+    return symbols
+
+
+def by_function(returns: list[tuple[int, int]], symbols: dict[str, tuple[int, int]]) -> dict[str, int]:
+    """Operations per function, most first, from (return address as an offset in the object, count) pairs: each goes
+    to the function whose code holds it (its :func:`demangle`\\ d name), or to ``"elsewhere"``."""
+    ranges = sorted((offset, offset + size, demangle(name)) for name, (offset, size) in symbols.items())
+    totals: dict[str, int] = {}
+    for address, count in returns:
+        owner = next((name for low, high, name in ranges if low <= address < high), "elsewhere")
+        totals[owner] = totals.get(owner, 0) + count
+    return dict(sorted(totals.items(), key=lambda item: -item[1]))
+
+
+def count_env(tree: Path, model: str, steps: int) -> dict:
+    """Reference-count operations over ``steps`` env steps in ``model``: per env step, in all and by function."""
+    with tempfile.TemporaryDirectory() as tmp:
+        address_file, object_file, counts_file, script = (Path(tmp) / name for name in
+                                                          ("address", "object.o", "counts.json", "count.gdb"))
+        script.write_text(_ENV_GDB.format(address_file=str(address_file), counts_file=str(counts_file)))
+        done = subprocess.run(["gdb", "-q", "-batch", "-x", str(script), "--args", sys.executable, "-c", _ENV_CHILD,
+                               str(tree), model, str(steps), str(address_file), str(object_file)],
+                              cwd=tree, capture_output=True, text=True, timeout=3600)
+        if not counts_file.exists():
+            raise RuntimeError(f"gdb wrote no counts:\n{(done.stdout + done.stderr)[-3000:]}")
+        returns = [(int(address), int(n)) for address, n in json.loads(counts_file.read_text())]
+        functions = by_function(returns, function_symbols(object_file))
+    total = sum(functions.values())
+    return {"model": model, "env_steps": steps, "per_env_step": total / steps,
+            "by_function_per_env_step": {name: n / steps for name, n in functions.items()}}
+
 
 _GDB = """set pagination off
 handle SIGUSR1 stop nopass
@@ -100,7 +231,11 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--calls", type=int, default=100, help="kernel calls counted (default 100)")
     parser.add_argument("--models", nargs="+", default=list(MODELS), choices=MODELS)
     parser.add_argument("--json", type=Path, help="write the counts to this JSON file")
+    parser.add_argument("--env", choices=MODELS, help="count whole env steps in this model instead, by function")
+    parser.add_argument("--steps", type=int, default=1, help="env steps counted with --env (default 1)")
     args = parser.parse_args(argv)
+    if args.env is not None:
+        return _main_env(parser, args)
     if not 1 <= args.calls <= 10_000:
         parser.error(f"--calls = {args.calls} must be within [1, 10000]")
     if shutil.which("gdb") is None:
@@ -135,6 +270,25 @@ def main(argv: list[str] | None = None) -> dict:
         args.json.write_text(json.dumps(results, indent=2) + "\n")
         print(f"wrote {args.json}")
     return results
+
+
+def _main_env(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
+    """``--env``: counts and prints an env step's operations by function."""
+    if not 1 <= args.steps <= 100:
+        parser.error(f"--steps = {args.steps} must be within [1, 100]")
+    if shutil.which("gdb") is None or shutil.which("readelf") is None:
+        parser.error("gdb and readelf are needed (they count the operations and name the functions that make them)")
+    print(f"counting {args.steps} env step(s), {args.env} ...", flush=True)
+    result = count_env(ROOT, args.env, args.steps)
+    total = result["per_env_step"]
+    print(f"\n{total:,.0f} reference-count operations per env step ({args.env}), by function:")
+    for name, n in list(result["by_function_per_env_step"].items())[:25]:
+        print(f"{n:>10,.0f}  {100 * n / total:5.1f} %  {name}")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return result
 
 
 if __name__ == "__main__":

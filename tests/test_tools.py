@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from benchmarks.compare_commits import higher_is_faster, measurements, paired_case, plot_ratios, run_benchmark
-from benchmarks.refcounts import hits
+from benchmarks.refcounts import by_function, demangle, hits
 from benchmarks.speed_vs_error import (
     OUTCOME_DEFAULT,
     OUTCOME_REFERENCE,
@@ -159,6 +159,18 @@ def test_refcounts_reads_each_breakpoints_hits_from_gdb_and_refuses_output_witho
     assert hits(listing) == (78837, 1)
     with pytest.raises(RuntimeError, match="two breakpoints"):
         hits(listing.split("2       breakpoint")[0])
+
+
+def test_refcounts_names_numbas_functions_and_gives_each_return_address_to_the_function_holding_it():
+    mangled = ("_ZN16soft_gripper_env7physics7kernels7contact17contact_reactionsB4v317B56c8tJTIeFIjxB2IKSgI4CrvQCk0Z4y"
+               "RYcWsBAK4JJIqUWsIgmAA_3d_3dE5ArrayIdLi3E1C7mutable7alignedE")
+    assert demangle(mangled) == "kernels.contact.contact_reactions"
+    assert demangle("_ZN5numba2np6linalg10solve_implB4v252E") == "numba.np.linalg.solve_impl"
+    assert demangle("NRT_incref") == "NRT_incref"
+    symbols = {mangled: (0x100, 0x40), "_ZN16soft_gripper_env7physics7solvers8stepping10take_stepsB2v5E": (0, 0x100)}
+    counts = by_function([(0x10, 3), (0x100, 5), (0x13F, 1), (0x140, 2), (0xFF, 4)], symbols)
+    assert counts == {"solvers.stepping.take_steps": 7, "kernels.contact.contact_reactions": 6, "elsewhere": 2}
+    assert list(counts) == ["solvers.stepping.take_steps", "kernels.contact.contact_reactions", "elsewhere"]
 
 
 def test_compare_commits_refuses_a_revision_that_is_not_a_commit():

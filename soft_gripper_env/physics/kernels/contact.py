@@ -84,10 +84,17 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
     unit = np.empty(dim)
     acting = np.empty(dim)
     for r in range(n_rods):
+        start, end = starts[r], ends[r]
         for i in range(n_nodes):
+            rubbing = False
+            for k in range(dim):
+                rubbing |= friction[r, i, k] != 0.0
+            # A node neither held nor rubbing feels nothing of the object: its reaction is the zero below, without
+            # the geometry, whose calls (with their arrays' reference counts) cost more than the rest of a free
+            # gripper's step outside Newton.
+            on_surface = (held[r, i] or rubbing) and outward_normal(q[r, i, :dim], start, end, nearest, unit)
             # On the segment itself (a planar section shrunk to a point) the normal is undefined and the object's
             # surface there faces out of the finger's plane: no normal reaction within it.
-            on_surface = outward_normal(q[r, i, :dim], starts[r], ends[r], nearest, unit)
             if on_surface:  # a sliding node's friction acts along the surface at its current point, as in the solve
                 along_surface(friction[r, i], unit, acting)
             for k in range(dim):
@@ -120,7 +127,7 @@ def within_reach(starts, ends, radii, length):
     return reach
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def distance_to_segment(point, start, end, nearest):
     """Distance from ``point`` to the segment start–end; writes the segment's nearest point into ``nearest``."""
     dim = point.size
@@ -155,29 +162,30 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
     for r in range(n_rods):
         if not searched[r]:
             continue
+        start, end = starts[r], ends[r]  # views taken once per rod: each costs reference counts
         for i in range(first_free_node, n_nodes):
             radius = radii[r, i]
             if held[r, i] or radius <= 0.0:
                 continue
-            distance = distance_to_segment(positions[r, i], starts[r], ends[r], nearest)
+            distance = distance_to_segment(positions[r, i], start, end, nearest)
             if not (distance < radius - tolerance and distance > 0.0):
                 continue
             for k in range(dim):
                 begin[k] = old_positions[r, i, k] + shifts[r, k]  # the start of the path, relative to the object
                 point[k] = positions[r, i, k]
-            if distance_to_segment(begin, starts[r], ends[r], nearest) > radius:
+            if distance_to_segment(begin, start, end, nearest) > radius:
                 low, high = 0.0, 1.0  # bisect for the entry: outside at `low`, inside at `high`
                 for _ in range(40):
                     middle = 0.5 * (low + high)
                     for k in range(dim):
                         point[k] = begin[k] + middle * (positions[r, i, k] - begin[k])
-                    if distance_to_segment(point, starts[r], ends[r], nearest) > radius:
+                    if distance_to_segment(point, start, end, nearest) > radius:
                         low = middle
                     else:
                         high = middle
                 for k in range(dim):
                     point[k] = begin[k] + low * (positions[r, i, k] - begin[k])
-            distance = distance_to_segment(point, starts[r], ends[r], nearest)
+            distance = distance_to_segment(point, start, end, nearest)
             if distance == 0.0:
                 continue
             new_hold[r, i] = True
@@ -189,7 +197,7 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
     return found
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def outward_normal(point, start, end, nearest, normal):
     """The unit direction from the segment start–end to ``point`` (D,), into ``normal`` (D,), with the segment's
     nearest point in ``nearest`` (D,); returns False (and leaves ``normal``) where the point lies on the segment
@@ -216,7 +224,7 @@ def onto_surface(point, start, end, radius, normal):
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def along_surface(friction, normal, out):
     """The friction force ``friction`` (D,) turned into the tangent plane of ``normal`` (D,), keeping its size: the
     force a sliding node's friction exerts at its current point, whatever the surface's normal was when it was set."""

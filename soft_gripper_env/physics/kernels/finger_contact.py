@@ -102,7 +102,7 @@ class FingerContact(NamedTuple):
         return cls(stiffness, float(friction), disc.node_radius.copy(), eligible, np.ascontiguousarray(axes))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _world(q_node, axes, out):
     """A node's world position (3,) [m] from its coordinates ``q_node`` (≥ D,) on a finger with ``axes`` (D, 3)."""
     for k in range(3):
@@ -111,13 +111,12 @@ def _world(q_node, axes, out):
             out[k] += q_node[d] * axes[d, k]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _nearest_on_finger(point, finger, eligible, first_edge, last_edge, nearest):
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _nearest_on_finger(point, finger, eligible, first_edge, last_edge, nearest, candidate):
     """The nearest point of a finger's centre line, world nodes ``finger`` (N, 3), on its ``eligible`` (N − 1,)
     edges from ``first_edge`` to ``last_edge``: returns (distance [m], edge, t) and writes the point to ``nearest``
-    (3,); edge −1 where none is eligible."""
+    (3,); edge −1 where none is eligible. ``candidate`` (3,) is scratch."""
     best, best_edge, best_t = np.inf, -1, 0.0
-    candidate = np.empty(3)
     for j in range(first_edge, last_edge + 1):
         if not eligible[j]:
             continue
@@ -141,7 +140,7 @@ def _onto_tangent_plane(vector, normal):
         vector[k] -= along * normal[k]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _finger_world(q_rod, axes, out):
     """A finger's world node positions (N, 3) [m] from its coordinates (N, ≥D)."""
     for i in range(q_rod.shape[0]):
@@ -198,12 +197,14 @@ def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near):
                 bound = max(bound, apart + radius[j])
                 chunk_motion[o, c] = max(chunk_motion[o, c], motion[o, j])
             bounds[o, c] = bound
-    nearest = np.empty(3)
+    nearest, candidate = np.empty(3), np.empty(3)
     for f in range(n_fingers):
         for i in range(n_nodes):
+            node = old[f, i]  # views taken out of the loops below: each costs reference counts
             for o in range(n_fingers):
                 if o == f:
                     continue
+                other, allowed = old[o], eligible[f, i, o]
                 best, best_edge, best_t, best_motion = np.inf, -1, 0.0, 0.0
                 for c in range(n_chunks):
                     allowance = radius[i] + NEAR_MARGIN + 2.0 * (motion[f, i] + chunk_motion[o, c])
@@ -213,8 +214,8 @@ def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near):
                     if to_centre - bounds[o, c] > allowance:
                         continue
                     last_edge = min((c + 1) * CHUNK_EDGES, n_nodes - 1) - 1
-                    distance, edge, t = _nearest_on_finger(old[f, i], old[o], eligible[f, i, o], c * CHUNK_EDGES,
-                                                           last_edge, nearest)
+                    distance, edge, t = _nearest_on_finger(node, other, allowed, c * CHUNK_EDGES, last_edge, nearest,
+                                                           candidate)
                     if distance < best:
                         best, best_edge, best_t, best_motion = distance, edge, t, chunk_motion[o, c]
                 if best_edge < 0:
@@ -247,7 +248,7 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
     stride = q.shape[2]
     kd = band.shape[1] - 1
     own_axes = axes[f]
-    x, x_old, nearest, nearest_old = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    x, x_old, nearest, nearest_old, candidate = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     normal, slip, world_force = np.empty(3), np.empty(3), np.empty(3)
     other_old = np.empty((n_nodes, 3))
     end_a, end_b = np.empty(3), np.empty(3)
@@ -267,9 +268,10 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
             last_edge = min(edge0 + SEARCH_WINDOW, n_nodes - 2)
             _world(q[r, i], own_axes, x)
             _world(q_old[r, i], own_axes, x_old)
-            distance, edge, t = _nearest_on_finger(x, other_old, eligible[f, i, o], first_edge, last_edge, nearest)
+            distance, edge, t = _nearest_on_finger(x, other_old, eligible[f, i, o], first_edge, last_edge, nearest,
+                                                   candidate)
             distance_old, edge_old, t_old = _nearest_on_finger(x_old, other_old, eligible[f, i, o], first_edge,
-                                                               last_edge, nearest_old)
+                                                               last_edge, nearest_old, candidate)
             reach = radius[i] + (1.0 - t) * radius[edge] + t * radius[edge + 1]
             overlap = reach - distance_old - 2.0 * (distance - distance_old)
             start_push = 0.0  # friction's normal force, the start of the step's (the module notes say why)

@@ -152,26 +152,26 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, gr
     w2 = eb * kappa2
     w3 = gj * twist
     energy = 0.5 * eb * (dk1 * dk1 + kappa2 * kappa2) + 0.5 * gj * twist * twist
-    # gradients of κ1, κ2 and the twist over the stencil, as (position blocks, θ_e, θ_f)
-    g1, g2, gt = vectors[0], vectors[1], vectors[2]
+    # gradients of κ1, κ2 and the twist over the stencil, as (position blocks, θ_e, θ_f): rows 0, 1, 2 of
+    # ``vectors``, indexed in place (a view of each row, made per node, would cost reference counts)
     for k in range(3):
-        g1[k], g1[4 + k], g1[8 + k] = -dk1de[k], dk1de[k] - dk1df[k], dk1df[k]
-        g2[k], g2[4 + k], g2[8 + k] = -dk2de[k], dk2de[k] - dk2df[k], dk2df[k]
-        gt[k] = -0.5 / le * kb[k]
-        gt[8 + k] = 0.5 / lf * kb[k]
-        gt[4 + k] = -gt[k] - gt[8 + k]
-    g1[3], g1[7] = -0.5 * kb_m1e, -0.5 * kb_m1f
-    g2[3], g2[7] = -0.5 * kb_m2e, -0.5 * kb_m2f
-    gt[3], gt[7] = -1.0, 1.0
+        vectors[0, k], vectors[0, 4 + k], vectors[0, 8 + k] = -dk1de[k], dk1de[k] - dk1df[k], dk1df[k]
+        vectors[1, k], vectors[1, 4 + k], vectors[1, 8 + k] = -dk2de[k], dk2de[k] - dk2df[k], dk2df[k]
+        vectors[2, k] = -0.5 / le * kb[k]
+        vectors[2, 8 + k] = 0.5 / lf * kb[k]
+        vectors[2, 4 + k] = -vectors[2, k] - vectors[2, 8 + k]
+    vectors[0, 3], vectors[0, 7] = -0.5 * kb_m1e, -0.5 * kb_m1f
+    vectors[1, 3], vectors[1, 7] = -0.5 * kb_m2e, -0.5 * kb_m2f
+    vectors[2, 3], vectors[2, 7] = -1.0, 1.0
     for a in range(11):
-        grad[a] = w1 * g1[a] + w2 * g2[a] + w3 * gt[a]
+        grad[a] = w1 * vectors[0, a] + w2 * vectors[1, a] + w3 * vectors[2, a]
     if not accumulate_hessian:
         return energy
-    # Second derivatives with respect to the edges e and f, weighted and summed over κ1 (w1), κ2 (w2), twist (w3).
+    # Second derivatives with respect to the edges e and f, weighted and summed over κ1 (w1), κ2 (w2), twist (w3):
+    # the blocks ee, ff and ef, ``blocks[0]``, ``[1]`` and ``[2]``.
     le2, lf2, lelf = le * le, lf * lf, le * lf
     te_tt = _axpy(1.0, te, 1.0, tt)
     tf_tt = _axpy(1.0, tf, 1.0, tt)
-    cee, cff, cef = blocks[0], blocks[1], blocks[2]
     for i in range(3):
         for j in range(3):
             delta = 1.0 if i == j else 0.0
@@ -195,9 +195,9 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, gr
             k2ef = (-kappa2 / (chi * lelf) * (delta + te[i] * tf[j])
                     + (2.0 * kappa2 * ttij + tf_x_d1t[i] * tt[j] - tt[i] * te_x_d1t[j] + x_d1t) / lelf)
             tef = 0.5 / lelf * (2.0 / chi * x_te - kb[i] * tt[j])
-            cee[i, j] = w1 * k1ee + w2 * k2ee + w3 * tee
-            cff[i, j] = w1 * k1ff + w2 * k2ff + w3 * tff
-            cef[i, j] = w1 * k1ef + w2 * k2ef + w3 * tef
+            blocks[0, i, j] = w1 * k1ee + w2 * k2ee + w3 * tee
+            blocks[1, i, j] = w1 * k1ff + w2 * k2ff + w3 * tff
+            blocks[2, i, j] = w1 * k1ef + w2 * k2ef + w3 * tef
     # mixed position–twist-angle derivatives (the twist's own are zero)
     tf_x_m1e, tf_x_m1f, te_x_m1e, te_x_m1f = _cross(tf, m1e), _cross(tf, m1f), _cross(te, m1e), _cross(te, m1f)
     tf_x_m2e, tf_x_m2f, te_x_m2e, te_x_m2f = _cross(tf, m2e), _cross(tf, m2f), _cross(te, m2e), _cross(te, m2f)
@@ -214,7 +214,7 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, gr
     # chain rule from the edges e = x_i − x_{i−1}, f = x_{i+1} − x_i to the stencil's nodes
     for i in range(3):
         for j in range(3):
-            ee, ff, ef, fe = cee[i, j], cff[i, j], cef[i, j], cef[j, i]
+            ee, ff, ef, fe = blocks[0, i, j], blocks[1, i, j], blocks[2, i, j], blocks[2, j, i]
             hess[i, j] = ee
             hess[i, 4 + j] = -ee + ef
             hess[i, 8 + j] = -ef
@@ -233,7 +233,8 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, gr
     hess[3, 7] = hess[7, 3] = 0.0
     for a in range(11):  # the lower triangle, which is all the band reads (linalg.scatter_contiguous)
         for b in range(a + 1):
-            hess[a, b] += eb * (g1[a] * g1[b] + g2[a] * g2[b]) + gj * gt[a] * gt[b]
+            hess[a, b] += eb * (vectors[0, a] * vectors[0, b] + vectors[1, a] * vectors[1, b]) \
+                + gj * vectors[2, a] * vectors[2, b]
     return energy
 
 

@@ -255,15 +255,18 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
     - ``changed``: rods with any of these, or, while ``settle_friction``, whose friction moved by more than
       :data:`FRICTION_TOLERANCE` (:attr:`~..scene.objects.ContactSettings.friction_passes`).
     """
+    # the bundles' members taken out once: read in the branches below, each would cost reference counts
     adhesive, new_hold, changed = changes.adhesive, changes.new_hold, changes.changed
-    held, sliding = holds.held, holds.sliding
+    slide, new_friction, stuck_again, hold_at = changes.slide, changes.friction, changes.stuck_again, changes.hold_at
+    held, sliding, old_friction = holds.held, holds.sliding, holds.friction
+    starts, ends = view.starts, view.ends
     n_rods, n_nodes, dim = positions.shape
     stride = residual.shape[1] // n_nodes
     force_tolerance = solver.force_tolerance
     new_hold[:, :] = False
-    changes.stuck_again[:, :] = False
+    stuck_again[:, :] = False
     found = find_penetrations(positions, old_positions, view, held, solver.first_free_node, PENETRATION_TOLERANCE,
-                              new_hold, changes.hold_at)
+                              new_hold, hold_at)
     nearest = np.empty(dim)
     normal = np.empty(dim)
     reaction = np.empty(dim)
@@ -273,10 +276,10 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
         mu = friction[r]
         for i in range(n_nodes):
             adhesive[r, i] = False
-            changes.slide[r, i] = False
+            slide[r, i] = False
             if not held[r, i]:
                 continue
-            if not outward_normal(positions[r, i], view.starts[r], view.ends[r], nearest, normal):
+            if not outward_normal(positions[r, i], starts[r], ends[r], nearest, normal):
                 # Held on the segment itself, a section shrunk to a point: it cannot hold a node, so it lets go.
                 adhesive[r, i] = True
                 changed[r] = True
@@ -290,9 +293,9 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
                 changed[r] = True
                 continue
             if not within_budget or mu == np.inf:
-                changes.slide[r, i] = sliding[r, i]
+                slide[r, i] = sliding[r, i]
                 for d in range(dim):
-                    changes.friction[r, i, d] = holds.friction[r, i, d]
+                    new_friction[r, i, d] = old_friction[r, i, d]
                 continue
             limit = mu * max(normal_reaction, 0.0)
             if not sliding[r, i]:  # stuck: within the cone, or slides along its tangential reaction
@@ -301,10 +304,10 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
                     tangential += (reaction[d] - normal_reaction * normal[d]) ** 2
                 tangential = np.sqrt(tangential)
                 if tangential > limit + force_tolerance:
-                    changes.slide[r, i] = True
+                    slide[r, i] = True
                     changed[r] = True
                     for d in range(dim):
-                        changes.friction[r, i, d] = limit * (reaction[d] - normal_reaction * normal[d]) / tangential
+                        new_friction[r, i, d] = limit * (reaction[d] - normal_reaction * normal[d]) / tangential
                 continue
             along = 0.0  # sliding: how far it has slid from where it stuck, along the surface
             for d in range(dim):
@@ -315,28 +318,28 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
             for d in range(dim):
                 slip[d] -= along * normal[d]
                 size += slip[d] ** 2
-                against += slip[d] * holds.friction[r, i, d]
+                against += slip[d] * old_friction[r, i, d]
             size = np.sqrt(size)
             if against > 0.0:  # its friction no longer opposes its motion: it has stopped and turned back
-                changes.stuck_again[r, i] = True
+                stuck_again[r, i] = True
                 changed[r] = True
                 for d in range(dim):
-                    changes.hold_at[r, i, d] = positions[r, i, d]
+                    hold_at[r, i, d] = positions[r, i, d]
                 continue
-            changes.slide[r, i] = True
+            slide[r, i] = True
             old_size = 0.0
             for d in range(dim):
-                old_size += holds.friction[r, i, d] ** 2
+                old_size += old_friction[r, i, d] ** 2
             old_size = np.sqrt(old_size)
             moved = 0.0
             for d in range(dim):  # against the motion; a node that did not move keeps its friction's direction
                 if size > 0.0:
-                    changes.friction[r, i, d] = -limit * slip[d] / size
+                    new_friction[r, i, d] = -limit * slip[d] / size
                 elif old_size > 0.0:
-                    changes.friction[r, i, d] = limit * holds.friction[r, i, d] / old_size
+                    new_friction[r, i, d] = limit * old_friction[r, i, d] / old_size
                 else:
-                    changes.friction[r, i, d] = 0.0
-                moved += (changes.friction[r, i, d] - holds.friction[r, i, d]) ** 2
+                    new_friction[r, i, d] = 0.0
+                moved += (new_friction[r, i, d] - old_friction[r, i, d]) ** 2
             if settle_friction and np.sqrt(moved) > FRICTION_TOLERANCE * limit + force_tolerance:
                 changed[r] = True
 

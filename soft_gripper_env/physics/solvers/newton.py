@@ -584,17 +584,19 @@ def _slide_rows(r, holds, normals, residual, right_hand_side, band, tolerance_in
 def _unrotate_steps(first_rod, holds, work):
     """Turns the Newton steps of every active rod's sliding nodes, x0 and X (work), from their surface frames back
     into the rod's coordinates."""
-    normals, basis = work.normals, work.basis
+    # the bundles' members taken out once: read in the branches below, each would cost reference counts
+    normals, basis, active, x0, x_coupling = work.normals, work.basis, work.active, work.x0, work.x_coupling
+    held, sliding = holds.held, holds.sliding
     dim = basis.shape[0]
-    stride = work.x0.shape[1] // normals.shape[1]
+    stride = x0.shape[1] // normals.shape[1]
     value = np.empty(dim)
-    columns = work.x_coupling.shape[2] if work.x_coupling.shape[0] > 0 else 0  # X only with a body
-    for f in range(work.active.size):
-        if not work.active[f]:
+    columns = x_coupling.shape[2] if x_coupling.shape[0] > 0 else 0  # X only with a body
+    for f in range(active.size):
+        if not active[f]:
             continue
         r = first_rod + f
         for i in range(normals.shape[1]):
-            if not (holds.held[r, i] and holds.sliding[r, i]):
+            if not (held[r, i] and sliding[r, i]):
                 continue
             tangent_basis(normals[f, i], basis)
             first = stride * i
@@ -602,13 +604,13 @@ def _unrotate_steps(first_rod, holds, work):
                 for d in range(dim):
                     value[d] = 0.0
                     for a in range(dim):
-                        step = work.x0[f, first + a] if column < 0 else work.x_coupling[f, first + a, column]
+                        step = x0[f, first + a] if column < 0 else x_coupling[f, first + a, column]
                         value[d] += basis[d, a] * step
                 for d in range(dim):
                     if column < 0:
-                        work.x0[f, first + d] = value[d]
+                        x0[f, first + d] = value[d]
                     else:
-                        work.x_coupling[f, first + d, column] = value[d]
+                        x_coupling[f, first + d, column] = value[d]
 
 
 @njit(cache=True, error_model="numpy", inline="always")
