@@ -443,7 +443,8 @@ def _rod_equations(r, q, step, rods, terms, solver, measured, holds, residual, r
     largest scaled residual and ``largest``."""
     own, largest = _rod_residual(r, q, step, rods, terms, solver, measured, residual, right_hand_side, largest, band,
                                  scratch, matrix)
-    if holds is not None:
+    # a rod with no sliding node has nothing to turn: the test costs less than binding the call's arrays
+    if holds is not None and holds.sliding[r].any():
         own, largest = _slide_rows(r, holds, normals, residual, right_hand_side, band, solver.tolerance_inverse, own,
                                    largest, basis)
     return own, largest
