@@ -265,11 +265,16 @@ def main(argv: list[str] | None = None) -> dict:
                       f"{entry[side]['decref_per_call']:>12.1f}")
         if "ratio_this_to_base" in entry:
             print(f"{model:<8}this tree / base: {entry['ratio_this_to_base']:.3f}")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
-        print(f"wrote {args.json}")
+    _write_json(args.json, results)
     return results
+
+
+def _write_json(path: Path | None, results: dict) -> None:
+    """Writes ``results`` to ``path`` (its folder made), unless ``path`` is None."""
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(results, indent=2) + "\n")
+        print(f"wrote {path}")
 
 
 def _main_env(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
@@ -284,10 +289,7 @@ def _main_env(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict
     print(f"\n{total:,.0f} reference-count operations per env step ({args.env}), by function:")
     for name, n in list(result["by_function_per_env_step"].items())[:25]:
         print(f"{n:>10,.0f}  {100 * n / total:5.1f} %  {name}")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2) + "\n")
-        print(f"wrote {args.json}")
+    _write_json(args.json, result)
     return result
 
 
