@@ -89,12 +89,11 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
             rubbing = False
             for k in range(dim):
                 rubbing |= friction[r, i, k] != 0.0
-            # A node neither held nor rubbing feels nothing of the object: its reaction is the zero below, without
-            # the geometry, whose calls (with their arrays' reference counts) cost more than the rest of a free
-            # gripper's step outside Newton.
+            # A node neither held nor rubbing feels nothing of the object: its reaction is the zero below, so the
+            # geometry (a fifth of a free env step's reference counts when every node took it) is skipped. On the
+            # segment itself (a planar section shrunk to a point) the normal is undefined and the object's surface
+            # there faces out of the finger's plane: no normal reaction within it.
             on_surface = (held[r, i] or rubbing) and outward_normal(q[r, i, :dim], start, end, nearest, unit)
-            # On the segment itself (a planar section shrunk to a point) the normal is undefined and the object's
-            # surface there faces out of the finger's plane: no normal reaction within it.
             if on_surface:  # a sliding node's friction acts along the surface at its current point, as in the solve
                 along_surface(friction[r, i], unit, acting)
             for k in range(dim):
