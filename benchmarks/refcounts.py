@@ -238,8 +238,7 @@ def main(argv: list[str] | None = None) -> dict:
         return _main_env(parser, args)
     if not 1 <= args.calls <= 10_000:
         parser.error(f"--calls = {args.calls} must be within [1, 10000]")
-    if shutil.which("gdb") is None:
-        parser.error("gdb is needed (it counts the calls with breakpoints) and is not on the PATH")
+    _require(parser, "gdb")
     base_commit = None
     if args.base is not None:
         base_commit = resolve(args.base)
@@ -269,6 +268,14 @@ def main(argv: list[str] | None = None) -> dict:
     return results
 
 
+def _require(parser: argparse.ArgumentParser, *tools: str) -> None:
+    """Stops with a usage error naming each of ``tools`` that is not on the PATH (gdb counts the operations with
+    breakpoints; readelf names the functions that make them)."""
+    missing = [tool for tool in tools if shutil.which(tool) is None]
+    if missing:
+        parser.error(f"{' and '.join(missing)} needed and not on the PATH")
+
+
 def _write_json(path: Path | None, results: dict) -> None:
     """Writes ``results`` to ``path`` (its folder made), unless ``path`` is None."""
     if path is not None:
@@ -281,8 +288,7 @@ def _main_env(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict
     """``--env``: counts and prints an env step's operations by function."""
     if not 1 <= args.steps <= 100:
         parser.error(f"--steps = {args.steps} must be within [1, 100]")
-    if shutil.which("gdb") is None or shutil.which("readelf") is None:
-        parser.error("gdb and readelf are needed (they count the operations and name the functions that make them)")
+    _require(parser, "gdb", "readelf")
     print(f"counting {args.steps} env step(s), {args.env} ...", flush=True)
     result = count_env(ROOT, args.env, args.steps)
     total = result["per_env_step"]
