@@ -80,7 +80,8 @@ def _observations(batch: GraspBatch, low: np.ndarray, high: np.ndarray) -> np.nd
     """(B, obs_dim) float32, a new array, clipped to the space (only a failing solver could leave it)."""
     parts = batch.observation_parts()  # in the full observation's order; the bounds are not rebuilt every step
     values = np.concatenate([parts[name] for name in _observed(batch.task, parts)], axis=1)
-    return np.clip(np.nan_to_num(values, nan=0.0), low, high).astype(np.float32)
+    np.nan_to_num(values, copy=False, nan=0.0)  # in place: ``values`` is the concatenation's own new array
+    return np.minimum(np.maximum(values, low, out=values), high, out=values).astype(np.float32)
 
 
 def _check_actions(action, shape: tuple[int, ...]) -> np.ndarray:

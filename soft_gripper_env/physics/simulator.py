@@ -364,11 +364,11 @@ class Simulator:
         if not -NATURAL_CURVATURE_LIMIT <= low <= high <= NATURAL_CURVATURE_LIMIT:
             raise ValueError(f"Simulator.advance: curvature_range = ({low:g}, {high:g}) (dimensionless) must be "
                              f"ordered and within [−{NATURAL_CURVATURE_LIMIT:g}, {NATURAL_CURVATURE_LIMIT:g}]")
-        rate = np.array(np.broadcast_to(curvature_rate, (B, F)), dtype=float).reshape(R)
-        if not np.all(np.isfinite(rate)):
+        rate = _copy_as(curvature_rate, (B, F), float).reshape(R)
+        if not np.isfinite(rate).all():
             raise ValueError("Simulator.advance: curvature_rate [1/s] must be finite")
-        running = np.ones(B, dtype=bool) if running is None else np.array(np.broadcast_to(running, (B,)), dtype=bool)
-        clock = np.zeros(B) if clock is None else np.array(np.broadcast_to(clock, (B,)), dtype=float)
+        running = np.ones(B, dtype=bool) if running is None else _copy_as(running, (B,), bool)
+        clock = np.zeros(B) if clock is None else _copy_as(clock, (B,), float)
         interval = Interval(self._natural_curvature(natural_curvature).copy(), rate, low, high, running,
                             np.zeros(B, dtype=bool), clock, np.zeros(B, dtype=np.int64),
                             np.zeros((R, self.disc.n_nodes)), np.zeros((R, self.disc.n_nodes, 3)),
@@ -751,6 +751,14 @@ class Simulator:
         c, theta = motion.position, motion.rotation
         return holds, (holds.offsets, c, (c - motion.old.position) / dt, motion.orientation, theta / dt)
 
+
+
+def _copy_as(value, shape: tuple[int, ...], dtype: type) -> np.ndarray:
+    """A new array of ``shape`` and ``dtype`` from ``value`` broadcast to it (a ValueError if it cannot be); an array
+    of that shape already skips ``np.broadcast_to``, whose call costs more than the copy."""
+    if isinstance(value, np.ndarray) and value.shape == shape:
+        return np.array(value, dtype=dtype)
+    return np.array(np.broadcast_to(value, shape), dtype=dtype)
 
 def _structure(scene: Scene) -> tuple:
     """What every gripper of a batch must share: the scene less its object's size, place, density and velocity,
