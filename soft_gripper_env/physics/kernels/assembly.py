@@ -25,7 +25,7 @@ from numba import njit
 from ..scene.discretization import Discretization
 from ..scene.fluid import Fluid
 from ..scene.forces import ForceModel, ForceTerms
-from .finger_contact import FingerContact, finger_contact_rod
+from .finger_contact import FingerContact, any_near, finger_contact_rod
 from .forces import added_mass, linear_damping, morison_drag, rod_water_velocity
 from .rod_3d import rod3d_elastic_rod
 from .rod_planar import planar_elastic_rod
@@ -146,8 +146,10 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, velocity, accele
             acceleration[i, k] = (q[r, i, k] - step.q_pred[r, i, k]) / (dt * dt)
     external_forces_rod(q[r, :, :dim], step.q_old[r, :, :dim], velocity, acceleration, step.water[r], terms,
                         1.0 / dt, 1.0 / (dt * dt), stride, force, band)
-    if step.near.size > 0:  # finger contact is on (the test costs less than the call)
-        finger_contact_rod(r, q, step.q_old, step.q_pred, dt, rods.fingers, step.near, hessian, force, band)
+    near = step.near
+    # finger contact is on, and the rod is near another finger: the tests cost less than binding the call's arrays
+    if near.size > 0 and any_near(near, r):
+        finger_contact_rod(r, q, step.q_old, step.q_pred, dt, rods.fingers, near, hessian, force, band)
     return energy
 
 

@@ -225,6 +225,16 @@ def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near):
                     near[first_rod + f, i, o] = best_edge
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def any_near(near, r):
+    """Whether any node of rod r is near another finger (``near`` (R, N, F) from :func:`find_near_fingers`)."""
+    found = False
+    for i in range(near.shape[1]):
+        for o in range(near.shape[2]):
+            found |= near[r, i, o] >= 0
+    return found
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, band):
     """Adds the other fingers' contact force on rod r's nodes [N] to ``force`` (N, S), in the rod's coordinates, and
@@ -236,11 +246,7 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
     stiffness, mu, radius, eligible, axes = contact.stiffness, contact.friction, contact.radius, contact.eligible, \
         contact.axes
     n_fingers, n_nodes = eligible.shape[0], eligible.shape[1]
-    any_near = False
-    for i in range(n_nodes):
-        for o in range(n_fingers):
-            any_near |= near[r, i, o] >= 0
-    if not any_near:  # the common case, before any work array is made
+    if not any_near(near, r):  # the common case, before any work array is made
         return
     f = r % n_fingers
     first_rod = r - f
@@ -328,5 +334,5 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
                     band[row, kd - a + b] += value
 
 
-__all__ = ["SEARCH_WINDOW", "CHUNK_EDGES", "NEAR_MARGIN", "FingerContact", "find_near_fingers",
+__all__ = ["any_near", "SEARCH_WINDOW", "CHUNK_EDGES", "NEAR_MARGIN", "FingerContact", "find_near_fingers",
            "near_fingers_of_gripper", "finger_contact_rod"]

@@ -125,11 +125,13 @@ def rod_frames(qr, tangent_old, director_old, ref_twist_old, tangent, director1,
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, grad, hess, vectors, blocks,
-                accumulate_hessian):
-    """Bending and twisting energy at one interior node; writes its gradient (11,) and the lower triangle of its
-    Hessian (11, 11) over (x_{i−1}, θ_e, x_i, θ_f, x_{i+1}). ``eb`` = EI/l_i, ``gj`` = GJ/l_i. ``vectors`` (3, 11)
-    and ``blocks`` (3, 3, 3) are scratch space."""
+def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, stencil, accumulate_hessian):
+    """Bending and twisting energy at one interior node; writes the lower triangle of its Hessian (11, 11) over
+    (x_{i−1}, θ_e, x_i, θ_f, x_{i+1}) into ``stencil[0]`` and its gradient (11,) into ``stencil[1, 0]``.
+    ``eb`` = EI/l_i, ``gj`` = GJ/l_i. The rest of ``stencil`` (6, 11, 11) is scratch: the gradients of κ1, κ2 and
+    the twist in rows 0–2 of ``stencil[2]``, the blocks of second derivatives by the edges in ``stencil[3:6]``.
+    One array for all of it, each part indexed in place: Numba binds every array argument again at each call, at
+    two reference-count operations each, and this runs at every interior node of every rod assembled."""
     chi = 1.0 + _dot(te, tf)
     kb = _scale(2.0 / chi, _cross(te, tf))
     tt = _scale(1.0 / chi, _axpy(1.0, te, 1.0, tf))
@@ -153,22 +155,22 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, gr
     w3 = gj * twist
     energy = 0.5 * eb * (dk1 * dk1 + kappa2 * kappa2) + 0.5 * gj * twist * twist
     # gradients of κ1, κ2 and the twist over the stencil, as (position blocks, θ_e, θ_f): rows 0, 1, 2 of
-    # ``vectors``, indexed in place (a view of each row, made per node, would cost reference counts)
+    # ``stencil[2]``, indexed in place (a view of each row, made per node, would cost reference counts)
     for k in range(3):
-        vectors[0, k], vectors[0, 4 + k], vectors[0, 8 + k] = -dk1de[k], dk1de[k] - dk1df[k], dk1df[k]
-        vectors[1, k], vectors[1, 4 + k], vectors[1, 8 + k] = -dk2de[k], dk2de[k] - dk2df[k], dk2df[k]
-        vectors[2, k] = -0.5 / le * kb[k]
-        vectors[2, 8 + k] = 0.5 / lf * kb[k]
-        vectors[2, 4 + k] = -vectors[2, k] - vectors[2, 8 + k]
-    vectors[0, 3], vectors[0, 7] = -0.5 * kb_m1e, -0.5 * kb_m1f
-    vectors[1, 3], vectors[1, 7] = -0.5 * kb_m2e, -0.5 * kb_m2f
-    vectors[2, 3], vectors[2, 7] = -1.0, 1.0
+        stencil[2, 0, k], stencil[2, 0, 4 + k], stencil[2, 0, 8 + k] = -dk1de[k], dk1de[k] - dk1df[k], dk1df[k]
+        stencil[2, 1, k], stencil[2, 1, 4 + k], stencil[2, 1, 8 + k] = -dk2de[k], dk2de[k] - dk2df[k], dk2df[k]
+        stencil[2, 2, k] = -0.5 / le * kb[k]
+        stencil[2, 2, 8 + k] = 0.5 / lf * kb[k]
+        stencil[2, 2, 4 + k] = -stencil[2, 2, k] - stencil[2, 2, 8 + k]
+    stencil[2, 0, 3], stencil[2, 0, 7] = -0.5 * kb_m1e, -0.5 * kb_m1f
+    stencil[2, 1, 3], stencil[2, 1, 7] = -0.5 * kb_m2e, -0.5 * kb_m2f
+    stencil[2, 2, 3], stencil[2, 2, 7] = -1.0, 1.0
     for a in range(11):
-        grad[a] = w1 * vectors[0, a] + w2 * vectors[1, a] + w3 * vectors[2, a]
+        stencil[1, 0, a] = w1 * stencil[2, 0, a] + w2 * stencil[2, 1, a] + w3 * stencil[2, 2, a]
     if not accumulate_hessian:
         return energy
     # Second derivatives with respect to the edges e and f, weighted and summed over κ1 (w1), κ2 (w2), twist (w3):
-    # the blocks ee, ff and ef, ``blocks[0]``, ``[1]`` and ``[2]``.
+    # the blocks ee, ff and ef, ``stencil[3]``, ``[4]`` and ``[5]``.
     le2, lf2, lelf = le * le, lf * lf, le * lf
     te_tt = _axpy(1.0, te, 1.0, tt)
     tf_tt = _axpy(1.0, tf, 1.0, tt)
@@ -195,9 +197,9 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, gr
             k2ef = (-kappa2 / (chi * lelf) * (delta + te[i] * tf[j])
                     + (2.0 * kappa2 * ttij + tf_x_d1t[i] * tt[j] - tt[i] * te_x_d1t[j] + x_d1t) / lelf)
             tef = 0.5 / lelf * (2.0 / chi * x_te - kb[i] * tt[j])
-            blocks[0, i, j] = w1 * k1ee + w2 * k2ee + w3 * tee
-            blocks[1, i, j] = w1 * k1ff + w2 * k2ff + w3 * tff
-            blocks[2, i, j] = w1 * k1ef + w2 * k2ef + w3 * tef
+            stencil[3, i, j] = w1 * k1ee + w2 * k2ee + w3 * tee
+            stencil[4, i, j] = w1 * k1ff + w2 * k2ff + w3 * tff
+            stencil[5, i, j] = w1 * k1ef + w2 * k2ef + w3 * tef
     # mixed position–twist-angle derivatives (the twist's own are zero)
     tf_x_m1e, tf_x_m1f, te_x_m1e, te_x_m1f = _cross(tf, m1e), _cross(tf, m1f), _cross(te, m1e), _cross(te, m1f)
     tf_x_m2e, tf_x_m2f, te_x_m2e, te_x_m2f = _cross(tf, m2e), _cross(tf, m2f), _cross(te, m2e), _cross(te, m2f)
@@ -214,27 +216,27 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, gr
     # chain rule from the edges e = x_i − x_{i−1}, f = x_{i+1} − x_i to the stencil's nodes
     for i in range(3):
         for j in range(3):
-            ee, ff, ef, fe = blocks[0, i, j], blocks[1, i, j], blocks[2, i, j], blocks[2, j, i]
-            hess[i, j] = ee
-            hess[i, 4 + j] = -ee + ef
-            hess[i, 8 + j] = -ef
-            hess[4 + i, j] = -ee + fe
-            hess[4 + i, 4 + j] = ee - ef - fe + ff
-            hess[4 + i, 8 + j] = ef - ff
-            hess[8 + i, j] = -fe
-            hess[8 + i, 4 + j] = fe - ff
-            hess[8 + i, 8 + j] = ff
+            ee, ff, ef, fe = stencil[3, i, j], stencil[4, i, j], stencil[5, i, j], stencil[5, j, i]
+            stencil[0, i, j] = ee
+            stencil[0, i, 4 + j] = -ee + ef
+            stencil[0, i, 8 + j] = -ef
+            stencil[0, 4 + i, j] = -ee + fe
+            stencil[0, 4 + i, 4 + j] = ee - ef - fe + ff
+            stencil[0, 4 + i, 8 + j] = ef - ff
+            stencil[0, 8 + i, j] = -fe
+            stencil[0, 8 + i, 4 + j] = fe - ff
+            stencil[0, 8 + i, 8 + j] = ff
         for col, ce, cf in ((3, ce_the, cf_the), (7, ce_thf, cf_thf)):
-            hess[i, col] = hess[col, i] = -ce[i]
-            hess[4 + i, col] = hess[col, 4 + i] = ce[i] - cf[i]
-            hess[8 + i, col] = hess[col, 8 + i] = cf[i]
-    hess[3, 3] = c_the2
-    hess[7, 7] = c_thf2
-    hess[3, 7] = hess[7, 3] = 0.0
+            stencil[0, i, col] = stencil[0, col, i] = -ce[i]
+            stencil[0, 4 + i, col] = stencil[0, col, 4 + i] = ce[i] - cf[i]
+            stencil[0, 8 + i, col] = stencil[0, col, 8 + i] = cf[i]
+    stencil[0, 3, 3] = c_the2
+    stencil[0, 7, 7] = c_thf2
+    stencil[0, 3, 7] = stencil[0, 7, 3] = 0.0
     for a in range(11):  # the lower triangle, which is all the band reads (linalg.scatter_contiguous)
         for b in range(a + 1):
-            hess[a, b] += eb * (vectors[0, a] * vectors[0, b] + vectors[1, a] * vectors[1, b]) \
-                + gj * vectors[2, a] * vectors[2, b]
+            stencil[0, a, b] += eb * (stencil[2, 0, a] * stencil[2, 0, b] + stencil[2, 1, a] * stencil[2, 1, b]) \
+                + gj * stencil[2, 2, a] * stencil[2, 2, b]
     return energy
 
 
@@ -265,10 +267,8 @@ def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, 
     m2 = np.empty((n_edges, 3))
     ref_twist = np.empty(n_nodes)
     lengths = np.empty(n_edges)
-    grad = np.empty(11)
-    hess = np.empty((11, 11))
-    vectors = np.empty((3, 11))
-    blocks = np.empty((3, 3, 3))
+    stencil = np.empty((6, 11, 11))  # _bend_twist's Hessian, gradient and scratch
+    hess = stencil[0]
     stretch_hess = np.zeros((7, 7))
     rod_frames(q, tangent_old, director_old, ref_twist_old, tangent, d1, ref_twist, m1, m2, lengths)
     for e in range(n_edges):
@@ -297,10 +297,10 @@ def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, 
         twist = q[i, 3] - q[e, 3] + ref_twist[i]
         energy += _bend_twist(_row(tangent, e), _row(tangent, i), lengths[e], lengths[i], _row(m1, e), _row(m2, e),
                               _row(m1, i), _row(m2, i), twist, natural_curvature,
-                              bend_stiffness[i] / voronoi_length[i], twist_stiffness[i] / voronoi_length[i], grad,
-                              hess, vectors, blocks, accumulate_hessian)
+                              bend_stiffness[i] / voronoi_length[i], twist_stiffness[i] / voronoi_length[i], stencil,
+                              accumulate_hessian)
         for a in range(11):
-            force[e + a // 4, a % 4] -= grad[a]
+            force[e + a // 4, a % 4] -= stencil[1, 0, a]
         if accumulate_hessian:
             scatter_contiguous(band, 4 * e, hess, 11)
     return energy

@@ -30,15 +30,14 @@ from numba import njit
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _stretch(q, i, rest_length, stretch_stiffness, force, band, accumulate_hessian):
-    """Stretch energy of edge i of one rod; adds force and Hessian (DOFs of nodes i, i+1)."""
+def _stretch(q, i, l0, ea, force, band, accumulate_hessian):
+    """Stretch energy of edge i of one rod, of rest length ``l0`` [m] and stiffness ``ea`` [N]; adds force and
+    Hessian (DOFs of nodes i, i+1)."""
     ex = q[i + 1, 0] - q[i, 0]
     ez = q[i + 1, 1] - q[i, 1]
     length = math.sqrt(ex * ex + ez * ez)
     tx = ex / length
     tz = ez / length
-    l0 = rest_length[i]
-    ea = stretch_stiffness[i]
     tension = ea * (length / l0 - 1.0)
     energy = 0.5 * ea * l0 * (length / l0 - 1.0) ** 2
     force[i, 0] += tension * tx
@@ -69,8 +68,9 @@ def _stretch(q, i, rest_length, stretch_stiffness, force, band, accumulate_hessi
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _bend(q, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accumulate_hessian):
-    """Bending energy at interior node i of one rod; adds force and Hessian (DOFs of nodes i−1, i, i+1)."""
+def _bend(q, i, k, kappa_bar, force, band, accumulate_hessian):
+    """Bending energy at interior node i of one rod, of stiffness ``k`` = EI/l_i [N·m]; adds force and Hessian (DOFs
+    of nodes i−1, i, i+1)."""
     ex = q[i, 0] - q[i - 1, 0]
     ez = q[i, 1] - q[i - 1, 1]
     fx = q[i + 1, 0] - q[i, 0]
@@ -82,7 +82,6 @@ def _bend(q, i, bend_stiffness, voronoi_length, kappa_bar, force, band, accumula
     gex, gez = -ez / e2, ex / e2
     gfx, gfz = -fz / f2, fx / f2
     gp0, gp1, gp2, gp3, gp4, gp5 = gex, gez, -gex - gfx, -gez - gfz, gfx, gfz  # ∇φ over the stencil
-    k = bend_stiffness[i] / voronoi_length[i]
     dk = kappa - kappa_bar
     dkappa = 1.0 + 0.25 * kappa * kappa  # dκ/dφ
     energy = 0.5 * k * dk * dk
@@ -140,9 +139,10 @@ def planar_elastic_rod(q, rest_length, stretch_stiffness, bend_stiffness, vorono
     energy = 0.0
     n_nodes = q.shape[0]
     for i in range(n_nodes - 1):
-        energy += _stretch(q, i, rest_length, stretch_stiffness, force, band, accumulate_hessian)
+        energy += _stretch(q, i, rest_length[i], stretch_stiffness[i], force, band, accumulate_hessian)
     for i in range(1, n_nodes - 1):
-        energy += _bend(q, i, bend_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian)
+        energy += _bend(q, i, bend_stiffness[i] / voronoi_length[i], natural_curvature, force, band,
+                        accumulate_hessian)
     return energy
 
 

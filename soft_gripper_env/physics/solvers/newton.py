@@ -352,9 +352,9 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
             if holds is not None and coupling is not None and touching[f]:
                 _place_held_nodes(b, first + f, q, holds, coupling, work.coupling[f], work.normals[f],
                                   work.body_residual)
-            rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds, coupling,
-                                                residual[first + f], x0[f], largest, bands[f], scratch, work.normals[f],
-                                                work.basis, matrices)
+            rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds,
+                                                not coupled, residual[first + f], x0[f], largest, bands[f], scratch,
+                                                work.normals[f], work.basis, matrices)
             if coupling is None and rubbing[f]:
                 if it > 0:  # back off a step that made the rod's residual worse
                     halving = 0
@@ -362,8 +362,8 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
                         halving += 1
                         _back_off_rod(first + f, q, work.rod_delta[f], 0.5**halving)
                         rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds,
-                                                            coupling, residual[first + f], x0[f], largest, bands[f],
-                                                            scratch, work.normals[f], work.basis, matrices)
+                                                            not coupled, residual[first + f], x0[f], largest,
+                                                            bands[f], scratch, work.normals[f], work.basis, matrices)
                 last_ratio[f] = rod_ratio[f]
             if coupling is not None:
                 if touching[f]:
@@ -425,11 +425,15 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _rod_system(r, q, step, rods, terms, solver, measured, holds, coupling, residual, right_hand_side, largest, band,
-                scratch, normals, basis, matrix):
-    """Rod r's Newton system at ``q``: its sliding nodes put onto a fixed object's surface, then
-    :func:`_rod_equations`. Returns the rod's largest scaled residual and ``largest``."""
-    if holds is not None and coupling is None:
+def _rod_system(r, q, step, rods, terms, solver, measured, holds, fixed_object, residual, right_hand_side, largest,
+                band, scratch, normals, basis, matrix):
+    """Rod r's Newton system at ``q``: its sliding nodes put onto the object's surface where the object is
+    ``fixed_object`` (a free body's follow the body instead), then :func:`_rod_equations`. Returns the rod's largest
+    scaled residual and ``largest``."""
+    # whether the object is fixed comes as a flag, not as the coupling itself: this runs once per rod and Newton
+    # iteration, and binding the coupling's two dozen arrays each time cost about a thousand reference-count
+    # operations per planar env step (benchmarks/refcounts.py)
+    if holds is not None and fixed_object:
         _slide_on_fixed_object(r, q, holds, normals)
     return _rod_equations(r, q, step, rods, terms, solver, measured, holds, residual, right_hand_side, largest, band,
                           scratch, normals, basis, matrix)
