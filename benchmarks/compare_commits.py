@@ -17,16 +17,16 @@ virtual machine the time the host takes away from this one inflates wall time in
 It suits single-threaded measurements (``core_speed``, and ``env_speed``'s one-thread cases); a two-thread
 measurement then counts both cores' time.
 
-``--paired`` (with ``--benchmarks core_speed``) times each of ``core_speed``'s cases in the two trees at the same
-time, each in a process pinned to a CPU of its own, the CPUs swapped every round: both warm up, then start timing
-together. Then both see the same spell of the machine, fast or slow. Where the whole machine drifts, that takes
-the drift out of each round's ratio: in a quiet half hour of 2026-12-03, eight paired rounds of the batched planar
-core agreed within 2 %, where sequential runs an hour before had put the same two trees 40 % apart. Where the host
-slows one CPU and not the other, single rounds still scatter (by up to 30 % in a busier hour the same evening), and
-the median of the rounds is the figure to read. Run whole, side by side, ``core_speed``'s phases would drift apart
-and lose the pairing, hence the cases one by one. The two processes share the cache and the memory bus (and, where
-the two CPUs are one core's hyperthreads, that core), so the ratio is of the trees under that shared load. It needs
-two CPUs.
+``--paired`` times each of ``core_speed``'s cases, and of ``env_speed``'s one-thread cases of one env and of
+``make_vec(64)`` on random actions, in the two trees at the same time, each in a process pinned to a CPU of its own,
+the CPUs swapped every round: both warm up, then start timing together. Then both see the same spell of the
+machine, fast or slow. Where the whole machine drifts, that takes the drift out of each round's ratio: in a quiet
+half hour of 2026-12-03, eight paired rounds of the batched planar core agreed within 2 %, where sequential runs an
+hour before had put the same two trees 40 % apart. Where the host slows one CPU and not the other, single rounds
+still scatter (by up to 30 % in a busier hour the same evening), and the median of the rounds is the figure to
+read. Run whole, side by side, the benchmarks' phases would drift apart and lose the pairing, hence the cases one by
+one. The two processes share the cache and the memory bus (and, where the two CPUs are one core's hyperthreads,
+that core), so the ratio is of the trees under that shared load. It needs two CPUs.
 """
 
 from __future__ import annotations
@@ -132,14 +132,55 @@ PAIRED_CASES = {"seed_scene_planar_s": ("planar", 1), "seed_scene_3d_s": ("3d", 
 paper scene's scripted run through the public ``paper_scene`` and ``run_ramp``, which every commit since the
 layering has."""
 
+_PAIRED_ENV_RUNNER = ISOLATE + """
+import json
+import os
+import time
+clock = time.process_time if sys.argv[2] == 'cpu' else time.perf_counter
+model, num_envs, repeats, steps = sys.argv[3], int(sys.argv[4]), int(sys.argv[5]), int(sys.argv[6])
+os.environ.setdefault('NUMBA_NUM_THREADS', '1')
+sys.path[:0] = [tree]
+import gymnasium as gym
+import soft_gripper_env
+env = (gym.make(soft_gripper_env.ENV_ID, model=model) if num_envs == 1 else
+       gym.make_vec(soft_gripper_env.ENV_ID, num_envs=num_envs, model=model))
+env.action_space.seed(0)
+env.reset(seed=0)
+def run():
+    for _ in range(steps):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if num_envs == 1 and (terminated or truncated):
+            env.reset()
+run()  # compilation and first-call costs, outside the timing
+print('ready', flush=True)
+sys.stdin.readline()
+times = []
+for _ in range(repeats):
+    start = clock()
+    run()
+    times.append(clock() - start)
+print(json.dumps({'best_s': min(times), 'env_steps': steps * num_envs}), flush=True)
+"""
+
+PAIRED_ENV_CASES = {"single_steps_per_s": ("planar", 1, 300), "single_3d_steps_per_s": ("3d", 1, 100),
+                    "vec64_steps_per_s": ("planar", 64, 12), "vec64_3d_steps_per_s": ("3d", 64, 4)}
+"""``env_speed``'s one-thread measurements as the paired runs take them: {measurement: (rod model, envs, actions
+per timing)}, random actions from ``gym.make`` or ``gym.make_vec``, each timing about half a second to a second."""
+
 
 def paired_case(trees: dict[str, Path], cpus: dict[str, int], measurement: str, repeats: int,
                 clock: str) -> dict[str, float]:
-    """One of :data:`PAIRED_CASES` run in both trees at once, each process pinned to its CPU (``cpus``: side →
-    CPU). Each warms up, then both time ``repeats`` runs from the same moment; {side: the best run's value}."""
-    model, batch_size = PAIRED_CASES[measurement]
+    """One of :data:`PAIRED_CASES` or :data:`PAIRED_ENV_CASES` run in both trees at once, each process pinned to its
+    CPU (``cpus``: side → CPU). Each warms up, then both time ``repeats`` runs from the same moment; {side: the best
+    run's value}."""
+    if measurement in PAIRED_ENV_CASES:
+        runner, arguments = _PAIRED_ENV_RUNNER, [str(value) for value in PAIRED_ENV_CASES[measurement]]
+        arguments.insert(2, str(repeats))
+    else:
+        model, batch_size = PAIRED_CASES[measurement]
+        runner, arguments = _PAIRED_RUNNER, [model, str(batch_size), str(repeats)]
     processes = {side: subprocess.Popen(
-        [sys.executable, "-c", _PAIRED_RUNNER, str(tree), clock, model, str(batch_size), str(repeats)], cwd=tree,
+        [sys.executable, "-c", runner, str(tree), clock, *arguments], cwd=tree,
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         preexec_fn=lambda cpu=cpus[side]: os.sched_setaffinity(0, {cpu})) for side, tree in trees.items()}
     try:
@@ -155,8 +196,12 @@ def paired_case(trees: dict[str, Path], cpus: dict[str, int], measurement: str, 
             if process.returncode != 0:
                 raise RuntimeError(f"{measurement} failed in {trees[side]}:\n{err[-3000:]}")
             result = json.loads(out)
-            values[side] = result["best_s"] if measurement.startswith("seed_scene") else (
-                result["best_s"] / result["gripper_steps"] * 1e6)
+            if measurement in PAIRED_ENV_CASES:
+                values[side] = result["env_steps"] / result["best_s"]
+            elif measurement.startswith("seed_scene"):
+                values[side] = result["best_s"]
+            else:
+                values[side] = result["best_s"] / result["gripper_steps"] * 1e6
         return values
     finally:
         for process in processes.values():
@@ -202,7 +247,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--clock", choices=CLOCKS, default="wall",
                         help="wall time, or the CPU time of each benchmark's process (default wall)")
     parser.add_argument("--paired", action="store_true",
-                        help="time core_speed's cases in both trees at the same time, one per CPU")
+                        help="time the benchmarks' one-thread cases in both trees at the same time, one per CPU")
     parser.add_argument("--json", type=Path, default=Path("out") / "compare_commits.json")
     parser.add_argument("--plot", type=Path, default=Path("out") / "compare_commits.png")
     args = parser.parse_args(argv)
@@ -215,16 +260,15 @@ def main(argv: list[str] | None = None) -> dict:
     cpus = sorted(os.sched_getaffinity(0))[:2]
     if args.paired and len(cpus) < 2:
         parser.error(f"--paired runs the two trees on two CPUs at once; this process may use {len(cpus)}")
-    if args.paired and args.benchmarks != ["core_speed"]:
-        parser.error("--paired times core_speed's cases alone: give --benchmarks core_speed")
 
     with worktree(base_commit) as base_tree, tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)
         trees = {"base": base_tree, "this": ROOT}
         best: dict[str, dict[str, float]] = {"base": {}, "this": {}}
         rounds: dict[str, list[float]] = {}
-        if args.paired:  # each of core_speed's cases in both trees at once, on CPUs swapped every round
-            runs = [(r, case) for r in range(args.rounds) for case in PAIRED_CASES]
+        if args.paired:  # each case in both trees at once, on CPUs swapped every round
+            cases = {"core_speed": list(PAIRED_CASES), "env_speed": list(PAIRED_ENV_CASES)}
+            runs = [(r, case) for r in range(args.rounds) for name in args.benchmarks for case in cases[name]]
         else:
             runs = [(r, name) for r in range(args.rounds) for name in args.benchmarks]
         for r, what in tqdm(runs, desc="benchmark rounds", unit="round"):

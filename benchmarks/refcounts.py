@@ -19,12 +19,23 @@ after a dozen), each a control interval of physics steps in one compiled call wi
 corrector, and says which compiled function makes them: a breakpoint reads each operation's return address, which
 falls in a function of the control interval's machine code (a function that Numba or LLVM has inlined counts as its
 caller). That shows where a step's reference counts are worth removing. Needs gdb and readelf.
+
+    python -m benchmarks.refcounts --env MODEL --lines [--json F]
+
+also gives each operation to the line of Python source whose code makes it (a line of a function Numba inlined
+counts as its own). For that the child compiles the package with Numba's debug information
+(``NUMBA_DEBUGINFO=1``, less the rest of Numba's debug mode, which keeps variables alive longer, checks bounds and
+stops inlining, and so changes the counts), into a cache of its own under ``out/refcounts_debug_cache`` so that the
+package's cache is not touched (the first run compiles everything, ten minutes or more), and ``addr2line`` reads the
+lines from the object's line table. The totals should match a run without ``--lines``; the JSON holds both views.
 """
 
 from __future__ import annotations
 
 import argparse
+import bisect
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -64,7 +75,7 @@ os.kill(os.getpid(), signal.SIGUSR1)
 """
 
 _ENV_CHILD = ISOLATE + """
-import os, signal
+import json, os, signal
 sys.path[:0] = [tree]
 model, steps, address_file, object_file = sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5]
 os.environ.setdefault('NUMBA_NUM_THREADS', '1')
@@ -75,6 +86,16 @@ def keep(library, value):
     objects.append((library, bytes(value)))
     return set_compiled_object(library, value)
 codegen.CPUCodeLibrary._set_compiled_object = keep
+if os.environ.get('NUMBA_DEBUGINFO') == '1':  # debug information without the rest of Numba's debug mode
+    from numba.core import cpu, lowering
+    finalize, pre_lower = cpu.CPUTargetOptions.finalize, lowering.Lower.pre_lower
+    def optimised(self, flags, options):  # variables die when unused and bounds go unchecked, as without
+        finalize(self, flags, options)
+        flags.dbg_extend_lifetimes, flags.boundscheck = False, False
+    def inlined(self):  # and LLVM may inline
+        pre_lower(self)
+        self.builder.function.attributes.discard('noinline')
+    cpu.CPUTargetOptions.finalize, lowering.Lower.pre_lower = optimised, inlined
 from pathlib import Path
 import gymnasium as gym
 from numba.core.runtime import rtsys
@@ -99,6 +120,19 @@ base = result.library.get_pointer_to_function(name) - symbols[name][0]
 targets = [rtsys.library.get_pointer_to_function(n) for n in ('NRT_incref', 'NRT_decref')]
 targets += [base + symbols[n][0] for n in ('NRT_incref', 'NRT_decref') if n in symbols]
 Path(address_file).write_text(' '.join(str(a) for a in [base] + targets))
+others = []  # every other library's object and where it lies, for the lines of code outside the interval's object
+for k, (owner, value) in enumerate(objects):
+    if owner is result.library:
+        continue
+    path = Path(object_file + f'.{k}')
+    path.write_bytes(value)
+    for symbol, (offset, _) in function_symbols(path).items():
+        try:
+            others.append((str(path), owner.get_pointer_to_function(symbol) - offset))
+            break
+        except Exception:
+            continue
+Path(object_file + '.others').write_text(json.dumps(others))
 os.kill(os.getpid(), signal.SIGUSR1)
 for _ in range(steps):
     env.step(env.action_space.sample())
@@ -168,22 +202,65 @@ def by_function(returns: list[tuple[int, int]], symbols: dict[str, tuple[int, in
     return dict(sorted(totals.items(), key=lambda item: -item[1]))
 
 
-def count_env(tree: Path, model: str, steps: int) -> dict:
-    """Reference-count operations over ``steps`` env steps in ``model``: per env step, in all and by function."""
+DEBUG_CACHE = ROOT / "out" / "refcounts_debug_cache"
+"""Where ``--lines`` keeps the package compiled with debug information."""
+
+
+def source_lines(objects: list[tuple[Path, int]], returns: list[tuple[int, int]]) -> dict[str, int]:
+    """Operations per source line (``file:line``, the file's path from the package's folder on), most first, from
+    (return address, count) pairs and the ``objects`` the code lies in, each with the address its offsets start
+    from, through ``addr2line``: a call's line is that of the byte before its return address; a line inlined into
+    another is its own."""
+    ranges = sorted((base + offset, base + offset + size, path, base) for path, base in objects
+                    for offset, size in function_symbols(path).values())
+    starts = [low for low, _, _, _ in ranges]
+    by_object: dict[Path, list[tuple[int, int]]] = {}
+    totals: dict[str, int] = {}
+    for address, n in returns:
+        k = bisect.bisect_right(starts, address - 1) - 1
+        if k >= 0 and ranges[k][0] <= address - 1 < ranges[k][1]:
+            by_object.setdefault(ranges[k][2], []).append((address - 1 - ranges[k][3], n))
+        else:
+            totals["elsewhere"] = totals.get("elsewhere", 0) + n
+    for path, calls in by_object.items():
+        listing = subprocess.run(["addr2line", "-e", str(path)] + [hex(offset) for offset, _ in calls],
+                                 capture_output=True, text=True, check=True).stdout.splitlines()
+        for (_, n), where in zip(calls, listing, strict=True):
+            where = where.split(" (discriminator")[0]
+            marker = where.find("soft_gripper_env/")
+            where = where[marker + len("soft_gripper_env/"):] if marker >= 0 else where
+            totals[where] = totals.get(where, 0) + n
+    return dict(sorted(totals.items(), key=lambda item: -item[1]))
+
+
+def count_env(tree: Path, model: str, steps: int, lines: bool = False) -> dict:
+    """Reference-count operations over ``steps`` env steps in ``model``: per env step, in all, by function and, with
+    ``lines``, by source line (compiled with debug information, :data:`DEBUG_CACHE`)."""
     with tempfile.TemporaryDirectory() as tmp:
         address_file, object_file, counts_file, script = (Path(tmp) / name for name in
                                                           ("address", "object.o", "counts.json", "count.gdb"))
         script.write_text(_ENV_GDB.format(address_file=str(address_file), counts_file=str(counts_file)))
+        environment = dict(os.environ)
+        if lines:
+            environment.update(NUMBA_DEBUGINFO="1", NUMBA_CACHE_DIR=str(DEBUG_CACHE))
         done = subprocess.run(["gdb", "-q", "-batch", "-x", str(script), "--args", sys.executable, "-c", _ENV_CHILD,
                                str(tree), model, str(steps), str(address_file), str(object_file)],
-                              cwd=tree, capture_output=True, text=True, timeout=3600)
+                              cwd=tree, capture_output=True, text=True, timeout=3600, env=environment)
         if not counts_file.exists():
             raise RuntimeError(f"gdb wrote no counts:\n{(done.stdout + done.stderr)[-3000:]}")
         returns = [(int(address), int(n)) for address, n in json.loads(counts_file.read_text())]
         functions = by_function(returns, function_symbols(object_file))
+        by_line = {}
+        if lines:  # the offsets are from the interval's object's start; other libraries' code lies elsewhere
+            base = int(address_file.read_text().split()[0])
+            others = [(Path(path), other) for path, other in json.loads(Path(f"{object_file}.others").read_text())]
+            by_line = source_lines([(object_file, base)] + others, [(base + a, n) for a, n in returns])
     total = sum(functions.values())
-    return {"model": model, "env_steps": steps, "per_env_step": total / steps,
-            "by_function_per_env_step": {name: n / steps for name, n in functions.items()}}
+    result = {"model": model, "env_steps": steps, "per_env_step": total / steps,
+              "by_function_per_env_step": {name: n / steps for name, n in functions.items()}}
+    if lines:
+        result["by_line_per_env_step"] = {where: n / steps for where, n in by_line.items()}
+    return result
 
 
 _GDB = """set pagination off
@@ -233,9 +310,13 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--json", type=Path, help="write the counts to this JSON file")
     parser.add_argument("--env", choices=MODELS, help="count whole env steps in this model instead, by function")
     parser.add_argument("--steps", type=int, default=1, help="env steps counted with --env (default 1)")
+    parser.add_argument("--lines", action="store_true",
+                        help="with --env, also by source line (compiles with debug information, cached apart)")
     args = parser.parse_args(argv)
     if args.env is not None:
         return _main_env(parser, args)
+    if args.lines:
+        parser.error("--lines counts by source line within env steps: give --env MODEL with it")
     if not 1 <= args.calls <= 10_000:
         parser.error(f"--calls = {args.calls} must be within [1, 10000]")
     _require(parser, "gdb")
@@ -288,13 +369,16 @@ def _main_env(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict
     """``--env``: counts and prints an env step's operations by function."""
     if not 1 <= args.steps <= 100:
         parser.error(f"--steps = {args.steps} must be within [1, 100]")
-    _require(parser, "gdb", "readelf")
-    print(f"counting {args.steps} env step(s), {args.env} ...", flush=True)
-    result = count_env(ROOT, args.env, args.steps)
+    _require(parser, "gdb", "readelf", *(("addr2line",) if args.lines else ()))
+    print(f"counting {args.steps} env step(s), {args.env}" + (" by line (debug build, may compile first)"
+                                                              if args.lines else "") + " ...", flush=True)
+    result = count_env(ROOT, args.env, args.steps, args.lines)
     total = result["per_env_step"]
-    print(f"\n{total:,.0f} reference-count operations per env step ({args.env}), by function:")
-    for name, n in list(result["by_function_per_env_step"].items())[:25]:
-        print(f"{n:>10,.0f}  {100 * n / total:5.1f} %  {name}")
+    for key, what in (("by_function_per_env_step", "function"), ("by_line_per_env_step", "source line")):
+        if key in result:
+            print(f"\n{total:,.0f} reference-count operations per env step ({args.env}), by {what}:")
+            for name, n in list(result[key].items())[:25]:
+                print(f"{n:>10,.0f}  {100 * n / total:5.1f} %  {name}")
     _write_json(args.json, result)
     return result
 

@@ -140,6 +140,53 @@ def test_paired_runs_start_timing_together_and_report_per_gripper_step(tmp_path)
     assert abs(starts["base"] - starts["this"]) < 0.5
 
 
+FAKE_ENV = """
+import time
+
+import gymnasium as gym
+import numpy as np
+
+ENV_ID = "PairedFake-{side}-v0"
+STEP_S = {step}
+
+
+class Fake(gym.Env):
+    observation_space = gym.spaces.Box(-1.0, 1.0, (1,))
+    action_space = gym.spaces.Box(-1.0, 1.0, (1,))
+
+    def __init__(self, model="planar"):
+        self.model = model
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return np.zeros(1, np.float32), {{}}
+
+    def step(self, action):
+        end = time.process_time() + STEP_S
+        while time.process_time() < end:  # busy: CPU time, as the paired runs measure it
+            pass
+        return np.zeros(1, np.float32), 0.0, False, False, {{}}
+
+
+gym.register(ENV_ID, entry_point=Fake)
+"""
+
+
+def test_paired_env_cases_report_env_steps_per_second_of_each_tree(tmp_path):
+    """env_speed's one-env case, paired: a fake env whose step costs twice the CPU time reads as half the env steps
+    per second."""
+    trees = {}
+    for side, step in (("base", 0.001), ("this", 0.002)):
+        package = tmp_path / side / "soft_gripper_env"
+        package.mkdir(parents=True)
+        (package / "__init__.py").write_text(FAKE_ENV.format(side=side, step=step))
+        trees[side] = tmp_path / side
+    cpus = sorted(os.sched_getaffinity(0))
+    values = paired_case(trees, {"base": cpus[0], "this": cpus[-1]}, "single_steps_per_s", 2, "cpu")
+    assert values["base"] == pytest.approx(1000.0, rel=0.2)
+    assert values["this"] == pytest.approx(500.0, rel=0.2)
+
+
 def test_compare_commits_plots_the_rounds_it_ran(tmp_path):
     results = {"base": "a" * 40, "head": "b" * 40, "rounds": 2, "clock": "cpu", "paired": True,
                "rows": [{"measurement": "seed_scene_planar_s", "speed_ratio": 1.02, "round_ratios": [0.97, 1.05],
