@@ -1,6 +1,6 @@
 """The refactoring guard (scripts/golden_outputs.py), the commit comparison (benchmarks/compare_commits.py), the
-reference-count benchmark's reading of gdb (benchmarks/refcounts.py) and the grasp-outcome study's scoring
-(benchmarks/speed_vs_error.py)."""
+reference-count benchmark's reading of gdb (benchmarks/refcounts.py), the profile's attribution of samples
+(benchmarks/profile_env.py) and the grasp-outcome study's scoring (benchmarks/speed_vs_error.py)."""
 
 import os
 import subprocess
@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from benchmarks.compare_commits import higher_is_faster, measurements, paired_case, plot_ratios, run_benchmark
+from benchmarks.profile_env import RUNTIME_BLOCK, attribute
 from benchmarks.refcounts import by_function, demangle, hits
 from benchmarks.speed_vs_error import (
     OUTCOME_DEFAULT,
@@ -274,3 +275,17 @@ def test_grasp_outcome_summary_scores_settings_against_the_reference(tmp_path):
     assert rows[far]["vs_ant_v5"] == pytest.approx(speeds[far]["grasping"] / 1000.0)
     plot_grasp_outcomes(summary, tmp_path / "outcomes.png")
     assert (tmp_path / "outcomes.png").stat().st_size > 10_000
+
+
+def test_profile_gives_each_sample_to_a_compiled_function_the_reference_counts_or_perfs_symbol():
+    drag = "_ZN16soft_gripper_env7physics7kernels6forces12morison_dragB4v123E"
+    steps = "_ZN16soft_gripper_env7physics7solvers8stepping10take_stepsB4v456E"
+    symbols = {drag: (0, 100), steps: (100, 50)}
+    base, runtime = 10_000, 50_000
+    samples = [(base + 10, "[unknown]"), (base + 99, "[unknown]"), (base + 120, ""),  # compiled
+               (runtime + 9, "[unknown]"), (runtime + RUNTIME_BLOCK - 1, "[unknown]"),  # reference counts
+               (runtime + RUNTIME_BLOCK, "[unknown]"), (base + 150, "[unknown]"),  # just outside both: unknown
+               (90_000, "_PyEval_EvalFrameDefault")]
+    assert attribute(samples, base, symbols, runtime) == {
+        "kernels.forces.morison_drag": 2, "runtime (reference counts)": 2, "unknown": 2,
+        "solvers.stepping.take_steps": 1, "_PyEval_EvalFrameDefault": 1}
