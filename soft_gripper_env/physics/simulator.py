@@ -752,13 +752,13 @@ class Simulator:
         return holds, (holds.offsets, c, (c - motion.old.position) / dt, motion.orientation, theta / dt)
 
 
-
 def _copy_as(value, shape: tuple[int, ...], dtype: type) -> np.ndarray:
     """A new array of ``shape`` and ``dtype`` from ``value`` broadcast to it (a ValueError if it cannot be); an array
     of that shape already skips ``np.broadcast_to``, whose call costs more than the copy."""
     if isinstance(value, np.ndarray) and value.shape == shape:
         return np.array(value, dtype=dtype)
     return np.array(np.broadcast_to(value, shape), dtype=dtype)
+
 
 def _structure(scene: Scene) -> tuple:
     """What every gripper of a batch must share: the scene less its object's size, place, density and velocity,

@@ -726,3 +726,27 @@ def test_the_objects_friction_reaches_the_physics():
             slid += int(contact.sliding.sum())
         sliding[friction] = slid
     assert sliding[math.inf] == 0 and sliding[GraspTask().object_friction] > 0
+
+
+def test_finger_gap_follows_the_state_through_steps_and_resets():
+    """The task measures the finger gap once per state: after every step and through an autoreset it equals the
+    distance from each finger's nearest surface to the sphere's, computed here from the nodes, the radii and the
+    sphere's centre."""
+    env = gym.make_vec(ENV_ID, num_envs=3, model="planar", max_episode_steps=7)
+    env.reset(seed=11)
+    batch = env.unwrapped._shards[0].batch
+    rng = np.random.default_rng(0)
+    changed = 0
+    last = None
+    for _ in range(12):
+        gap = batch.finger_gap
+        nodes = batch.sim.world_positions(batch.state)
+        radii = np.array([scene.grasped_object.radius for scene in batch.sim.scenes])[:, None, None]
+        surface = np.linalg.norm(nodes - batch.state.body_position[:, None, None, :], axis=-1) \
+            - batch.sim.finger_contact_radius - radii
+        np.testing.assert_allclose(gap, np.maximum(surface.min(axis=2), 0.0), rtol=0, atol=1e-12)
+        changed += last is not None and not np.array_equal(gap, last)
+        last = gap.copy()
+        env.step(rng.uniform(-1.0, -0.5, (3, 3)).astype(np.float32))
+    assert changed >= 8  # the gap moved with the fingers, and the comparison above saw new values
+    env.close()
