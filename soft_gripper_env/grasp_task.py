@@ -473,7 +473,7 @@ class GraspBatch:
         self.newton_iterations = np.zeros(B, dtype=np.int64)
         self._gap_of: tuple[RodState | None, np.ndarray | None] = (None, None)
         """:attr:`finger_gap` and the state it was measured in: the task reads it up to three times per step (the
-        reflexes, the reward, the observation) and each measure costs more than the rest of the reward."""
+        reflexes, the reward, the observation), and each measure costs about a third of the whole reward's time."""
 
     # --- reset -----------------------------------------------------------------------------------------------------
     def reset(self, indices, episodes: list[TaskEpisode], kind: str) -> None:

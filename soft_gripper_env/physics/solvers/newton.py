@@ -32,7 +32,7 @@ from numba import njit
 from ..kernels.assembly import StepInputs, assemble_rod, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
 from ..kernels.contact import along_surface, onto_surface, rotate_node, tangent_basis
-from ..kernels.finger_contact import near_fingers_of_gripper
+from ..kernels.finger_contact import any_near, near_fingers_of_gripper
 from ..kernels.linalg import factor_banded_symmetric, solve_factored, symmetric_band_entry
 from ..scene.forces import ForceTerms
 
@@ -328,7 +328,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
         if coupling is not None:
             touching[f] = holds.held[first + f].any()
         elif fingers_touch:  # a rod near another finger takes a line search (kernels/finger_contact.py)
-            rubbing[f] = (step.near[first + f] >= 0).any()
+            rubbing[f] = any_near(step.near, first + f)
     gripper_ratio = np.inf
     halvings = 0
     iterations = 0
