@@ -23,10 +23,9 @@ def symmetric_band_entry(band, i, j):
 def scatter_contiguous(band, offset, hessian, m):
     """Add the symmetric m×m ``hessian`` of DOFs offset … offset+m−1 into one rod's band (n, kd+1)."""
     kd = band.shape[1] - 1
-    for a in range(m):
-        row = band[offset + a]
+    for a in range(m):  # indexed in place: a view of each row would cost reference counts
         for b in range(a + 1):
-            row[kd - a + b] += hessian[a, b]
+            band[offset + a, kd - a + b] += hessian[a, b]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -124,14 +124,24 @@ def rod_frames(qr, tangent_old, director_old, ref_twist_old, tangent, director1,
         ref_twist[i] = ref_twist_old[i] + _signed_angle(u, _row(director1, i), t)
 
 
+(_TT, _TE, _TF, _KB, _M1E, _M2E, _M1F, _M2F, _D1T, _D2T, _TF_X_D2T, _TE_X_D2T, _TF_X_D1T, _TE_X_D1T, _TE_TT,
+ _TF_TT, _CE_THE, _CF_THE, _CE_THF, _CF_THF) = range(20)
+"""The rows of :func:`_bend_twist`'s ``vectors``: t_e, t_f, t̃ = (t_e + t_f)/χ, (κb), the material directors of the
+edges e and f, d̃1, d̃2 (the same sums for the directors), the cross products t_f × d̃2, t_e × d̃2, t_f × d̃1,
+t_e × d̃1, t_e + t̃, t_f + t̃, and the mixed derivatives' columns by θ_e and θ_f of the edges e and f."""
+N_STENCIL_VECTORS = 20
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, stencil, accumulate_hessian):
+def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, stencil, vectors,
+                accumulate_hessian):
     """Bending and twisting energy at one interior node; writes the lower triangle of its Hessian (11, 11) over
     (x_{i−1}, θ_e, x_i, θ_f, x_{i+1}) into ``stencil[0]`` and its gradient (11,) into ``stencil[1, 0]``.
     ``eb`` = EI/l_i, ``gj`` = GJ/l_i. The rest of ``stencil`` (6, 11, 11) is scratch: the gradients of κ1, κ2 and
     the twist in rows 0–2 of ``stencil[2]``, the blocks of second derivatives by the edges in ``stencil[3:6]``.
     One array for all of it, each part indexed in place: Numba binds every array argument again at each call, at
-    two reference-count operations each, and this runs at every interior node of every rod assembled."""
+    two reference-count operations each, and this runs at every interior node of every rod assembled.
+    ``vectors`` (:data:`N_STENCIL_VECTORS`, 3) is scratch for the 3-vectors the Hessian's blocks read."""
     chi = 1.0 + _dot(te, tf)
     kb = _scale(2.0 / chi, _cross(te, tf))
     tt = _scale(1.0 / chi, _axpy(1.0, te, 1.0, tf))
@@ -174,29 +184,41 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, st
     le2, lf2, lelf = le * le, lf * lf, le * lf
     te_tt = _axpy(1.0, te, 1.0, tt)
     tf_tt = _axpy(1.0, tf, 1.0, tt)
+    # the loop below reads its 3-vectors from rows of ``vectors``: a tuple indexed by a loop variable compiles to a
+    # branch per read, which made this loop cost twice what it does now (the same values and arithmetic)
+    v = vectors
+    for row, vector in enumerate((tt, te, tf, kb, m1e, m2e, m1f, m2f, d1t, d2t, tf_x_d2t, te_x_d2t, tf_x_d1t,
+                                  te_x_d1t, te_tt, tf_tt)):
+        v[row, 0], v[row, 1], v[row, 2] = vector
     for i in range(3):
         for j in range(3):
             delta = 1.0 if i == j else 0.0
-            ttij = tt[i] * tt[j]
-            k1ee = ((2.0 * kappa1 * ttij - tf_x_d2t[i] * tt[j] - tt[i] * tf_x_d2t[j]) / le2
-                    - kappa1 / (chi * le2) * (delta - te[i] * te[j]) + (kb[i] * m2e[j] + m2e[i] * kb[j]) / (4.0 * le2))
-            k1ff = ((2.0 * kappa1 * ttij + te_x_d2t[i] * tt[j] + tt[i] * te_x_d2t[j]) / lf2
-                    - kappa1 / (chi * lf2) * (delta - tf[i] * tf[j]) + (kb[i] * m2f[j] + m2f[i] * kb[j]) / (4.0 * lf2))
-            k2ee = ((2.0 * kappa2 * ttij + tf_x_d1t[i] * tt[j] + tt[i] * tf_x_d1t[j]) / le2
-                    - kappa2 / (chi * le2) * (delta - te[i] * te[j]) - (kb[i] * m1e[j] + m1e[i] * kb[j]) / (4.0 * le2))
-            k2ff = ((2.0 * kappa2 * ttij - te_x_d1t[i] * tt[j] - tt[i] * te_x_d1t[j]) / lf2
-                    - kappa2 / (chi * lf2) * (delta - tf[i] * tf[j]) - (kb[i] * m1f[j] + m1f[i] * kb[j]) / (4.0 * lf2))
-            tee = -0.25 / le2 * (kb[i] * te_tt[j] + te_tt[i] * kb[j])
-            tff = -0.25 / lf2 * (kb[i] * tf_tt[j] + tf_tt[i] * kb[j])
+            ttij = v[_TT, i] * v[_TT, j]
+            k1ee = ((2.0 * kappa1 * ttij - v[_TF_X_D2T, i] * v[_TT, j] - v[_TT, i] * v[_TF_X_D2T, j]) / le2
+                    - kappa1 / (chi * le2) * (delta - v[_TE, i] * v[_TE, j])
+                    + (v[_KB, i] * v[_M2E, j] + v[_M2E, i] * v[_KB, j]) / (4.0 * le2))
+            k1ff = ((2.0 * kappa1 * ttij + v[_TE_X_D2T, i] * v[_TT, j] + v[_TT, i] * v[_TE_X_D2T, j]) / lf2
+                    - kappa1 / (chi * lf2) * (delta - v[_TF, i] * v[_TF, j])
+                    + (v[_KB, i] * v[_M2F, j] + v[_M2F, i] * v[_KB, j]) / (4.0 * lf2))
+            k2ee = ((2.0 * kappa2 * ttij + v[_TF_X_D1T, i] * v[_TT, j] + v[_TT, i] * v[_TF_X_D1T, j]) / le2
+                    - kappa2 / (chi * le2) * (delta - v[_TE, i] * v[_TE, j])
+                    - (v[_KB, i] * v[_M1E, j] + v[_M1E, i] * v[_KB, j]) / (4.0 * le2))
+            k2ff = ((2.0 * kappa2 * ttij - v[_TE_X_D1T, i] * v[_TT, j] - v[_TT, i] * v[_TE_X_D1T, j]) / lf2
+                    - kappa2 / (chi * lf2) * (delta - v[_TF, i] * v[_TF, j])
+                    - (v[_KB, i] * v[_M1F, j] + v[_M1F, i] * v[_KB, j]) / (4.0 * lf2))
+            tee = -0.25 / le2 * (v[_KB, i] * v[_TE_TT, j] + v[_TE_TT, i] * v[_KB, j])
+            tff = -0.25 / lf2 * (v[_KB, i] * v[_TF_TT, j] + v[_TF_TT, i] * v[_KB, j])
             # cross-product matrices [a]× have entries [a]×_ij = −ε_ijk a_k
-            x_d2t = _cross_matrix_entry(d2t, i, j)
-            x_d1t = _cross_matrix_entry(d1t, i, j)
-            x_te = _cross_matrix_entry(te, i, j)
-            k1ef = (-kappa1 / (chi * lelf) * (delta + te[i] * tf[j])
-                    + (2.0 * kappa1 * ttij - tf_x_d2t[i] * tt[j] + tt[i] * te_x_d2t[j] - x_d2t) / lelf)
-            k2ef = (-kappa2 / (chi * lelf) * (delta + te[i] * tf[j])
-                    + (2.0 * kappa2 * ttij + tf_x_d1t[i] * tt[j] - tt[i] * te_x_d1t[j] + x_d1t) / lelf)
-            tef = 0.5 / lelf * (2.0 / chi * x_te - kb[i] * tt[j])
+            x_d2t = _cross_matrix_entry(v, _D2T, i, j)
+            x_d1t = _cross_matrix_entry(v, _D1T, i, j)
+            x_te = _cross_matrix_entry(v, _TE, i, j)
+            k1ef = (-kappa1 / (chi * lelf) * (delta + v[_TE, i] * v[_TF, j])
+                    + (2.0 * kappa1 * ttij - v[_TF_X_D2T, i] * v[_TT, j] + v[_TT, i] * v[_TE_X_D2T, j] - x_d2t)
+                    / lelf)
+            k2ef = (-kappa2 / (chi * lelf) * (delta + v[_TE, i] * v[_TF, j])
+                    + (2.0 * kappa2 * ttij + v[_TF_X_D1T, i] * v[_TT, j] - v[_TT, i] * v[_TE_X_D1T, j] + x_d1t)
+                    / lelf)
+            tef = 0.5 / lelf * (2.0 / chi * x_te - v[_KB, i] * v[_TT, j])
             stencil[3, i, j] = w1 * k1ee + w2 * k2ee + w3 * tee
             stencil[4, i, j] = w1 * k1ff + w2 * k2ff + w3 * tff
             stencil[5, i, j] = w1 * k1ef + w2 * k2ef + w3 * tef
@@ -213,6 +235,8 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, st
                    w2 / lf, _axpy(0.5 * kb_m2f, tt, 1.0 / chi, te_x_m2f))
     c_the2 = -0.5 * w1 * kb_m2e + 0.5 * w2 * kb_m1e
     c_thf2 = -0.5 * w1 * kb_m2f + 0.5 * w2 * kb_m1f
+    for row, vector in enumerate((ce_the, cf_the, ce_thf, cf_thf)):
+        v[_CE_THE + row, 0], v[_CE_THE + row, 1], v[_CE_THE + row, 2] = vector
     # chain rule from the edges e = x_i − x_{i−1}, f = x_{i+1} − x_i to the stencil's nodes
     for i in range(3):
         for j in range(3):
@@ -226,10 +250,10 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, st
             stencil[0, 8 + i, j] = -fe
             stencil[0, 8 + i, 4 + j] = fe - ff
             stencil[0, 8 + i, 8 + j] = ff
-        for col, ce, cf in ((3, ce_the, cf_the), (7, ce_thf, cf_thf)):
-            stencil[0, i, col] = stencil[0, col, i] = -ce[i]
-            stencil[0, 4 + i, col] = stencil[0, col, 4 + i] = ce[i] - cf[i]
-            stencil[0, 8 + i, col] = stencil[0, col, 8 + i] = cf[i]
+        for col, ce, cf in ((3, _CE_THE, _CF_THE), (7, _CE_THF, _CF_THF)):
+            stencil[0, i, col] = stencil[0, col, i] = -v[ce, i]
+            stencil[0, 4 + i, col] = stencil[0, col, 4 + i] = v[ce, i] - v[cf, i]
+            stencil[0, 8 + i, col] = stencil[0, col, 8 + i] = v[cf, i]
     stencil[0, 3, 3] = c_the2
     stencil[0, 7, 7] = c_thf2
     stencil[0, 3, 7] = stencil[0, 7, 3] = 0.0
@@ -241,13 +265,13 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, st
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _cross_matrix_entry(a, i, j):
-    """Entry (i, j) of the matrix [a]× with [a]×·b = a × b."""
+def _cross_matrix_entry(vectors, row, i, j):
+    """Entry (i, j) of the matrix [a]× with [a]×·b = a × b, for a = ``vectors[row]``."""
     if i == j:
         return 0.0
     k = 3 - i - j
     sign = 1.0 if (j - i) % 3 == 1 else -1.0
-    return -sign * a[k]
+    return -sign * vectors[row, k]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -268,6 +292,7 @@ def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, 
     ref_twist = np.empty(n_nodes)
     lengths = np.empty(n_edges)
     stencil = np.empty((6, 11, 11))  # _bend_twist's Hessian, gradient and scratch
+    vectors = np.empty((N_STENCIL_VECTORS, 3))
     hess = stencil[0]
     stretch_hess = np.zeros((7, 7))
     rod_frames(q, tangent_old, director_old, ref_twist_old, tangent, d1, ref_twist, m1, m2, lengths)
@@ -298,7 +323,7 @@ def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, 
         energy += _bend_twist(_row(tangent, e), _row(tangent, i), lengths[e], lengths[i], _row(m1, e), _row(m2, e),
                               _row(m1, i), _row(m2, i), twist, natural_curvature,
                               bend_stiffness[i] / voronoi_length[i], twist_stiffness[i] / voronoi_length[i], stencil,
-                              accumulate_hessian)
+                              vectors, accumulate_hessian)
         for a in range(11):
             force[e + a // 4, a % 4] -= stencil[1, 0, a]
         if accumulate_hessian:

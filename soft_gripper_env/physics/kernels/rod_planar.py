@@ -28,11 +28,16 @@ import math
 import numpy as np
 from numba import njit
 
+# The energy terms of one edge or node are numbers in, numbers out, without a branch, and the rod's loop writes them
+# into its arrays: an inlined helper that took the arrays and branched on the Hessian kept Numba's reference counts
+# for binding them at each node (per basic block, LLVM removes those pairs only where nothing branches).
+
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _stretch(q, i, l0, ea, force, band, accumulate_hessian):
-    """Stretch energy of edge i of one rod, of rest length ``l0`` [m] and stiffness ``ea`` [N]; adds force and
-    Hessian (DOFs of nodes i, i+1)."""
+def _stretch(q, i, l0, ea):
+    """Stretch energy of edge i of one rod, of rest length ``l0`` [m] and stiffness ``ea`` [N]: returns the energy
+    [J], the force on node i (s, z) [N] (node i+1 takes its opposite) and the block K (ss, sz, zz) [N/m] of the
+    Hessian [[K, −K], [−K, K]] over nodes i, i+1."""
     ex = q[i + 1, 0] - q[i, 0]
     ez = q[i + 1, 1] - q[i, 1]
     length = math.sqrt(ex * ex + ez * ez)
@@ -40,37 +45,19 @@ def _stretch(q, i, l0, ea, force, band, accumulate_hessian):
     tz = ez / length
     tension = ea * (length / l0 - 1.0)
     energy = 0.5 * ea * l0 * (length / l0 - 1.0) ** 2
-    force[i, 0] += tension * tx
-    force[i, 1] += tension * tz
-    force[i + 1, 0] -= tension * tx
-    force[i + 1, 1] -= tension * tz
-    if accumulate_hessian:
-        axial = ea / l0
-        lateral = tension / length
-        kxx = axial * tx * tx + lateral * (1.0 - tx * tx)
-        kxz = (axial - lateral) * tx * tz
-        kzz = axial * tz * tz + lateral * (1.0 - tz * tz)
-        band_r = band
-        kd = band_r.shape[1] - 1
-        o = 2 * i
-        # lower triangle of [[K, −K], [−K, K]] over (s, z) of nodes i, i+1
-        band_r[o, kd] += kxx
-        band_r[o + 1, kd - 1] += kxz
-        band_r[o + 1, kd] += kzz
-        band_r[o + 2, kd - 2] -= kxx
-        band_r[o + 2, kd - 1] -= kxz
-        band_r[o + 2, kd] += kxx
-        band_r[o + 3, kd - 3] -= kxz
-        band_r[o + 3, kd - 2] -= kzz
-        band_r[o + 3, kd - 1] += kxz
-        band_r[o + 3, kd] += kzz
-    return energy
+    axial = ea / l0
+    lateral = tension / length
+    kxx = axial * tx * tx + lateral * (1.0 - tx * tx)
+    kxz = (axial - lateral) * tx * tz
+    kzz = axial * tz * tz + lateral * (1.0 - tz * tz)
+    return energy, tension * tx, tension * tz, kxx, kxz, kzz
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _bend(q, i, k, kappa_bar, force, band, accumulate_hessian):
-    """Bending energy at interior node i of one rod, of stiffness ``k`` = EI/l_i [N·m]; adds force and Hessian (DOFs
-    of nodes i−1, i, i+1)."""
+def _bend(q, i, k, kappa_bar):
+    """Bending energy at interior node i of one rod, of stiffness ``k`` = EI/l_i [N·m]: returns the energy [J], its
+    gradient over the stencil (s, z of nodes i−1, i, i+1) [N] and the lower triangle of its Hessian there, row by
+    row (21 entries) [N/m]."""
     ex = q[i, 0] - q[i - 1, 0]
     ez = q[i, 1] - q[i - 1, 1]
     fx = q[i + 1, 0] - q[i, 0]
@@ -86,47 +73,26 @@ def _bend(q, i, k, kappa_bar, force, band, accumulate_hessian):
     dkappa = 1.0 + 0.25 * kappa * kappa  # dκ/dφ
     energy = 0.5 * k * dk * dk
     g = k * dk * dkappa
-    force[i - 1, 0] -= g * gp0
-    force[i - 1, 1] -= g * gp1
-    force[i, 0] -= g * gp2
-    force[i, 1] -= g * gp3
-    force[i + 1, 0] -= g * gp4
-    force[i + 1, 1] -= g * gp5
-    if accumulate_hessian:
-        # ∂²θ/∂e² = [[2 e_s e_z, e_z² − e_s²], [e_z² − e_s², −2 e_s e_z]]/|e|⁴, stored as (ss, sz, zz);
-        # φ = θ(f) − θ(e) couples nodes (0, 1) through e and (1, 2) through f.
-        e4 = e2 * e2
-        f4 = f2 * f2
-        he0, he1, he2 = 2.0 * ex * ez / e4, (ez * ez - ex * ex) / e4, -2.0 * ex * ez / e4
-        hf0, hf1, hf2 = 2.0 * fx * fz / f4, (fz * fz - fx * fx) / f4, -2.0 * fx * fz / f4
-        d2kappa = 0.5 * kappa * dkappa  # d²κ/dφ²
-        outer_coeff = k * (dkappa * dkappa + dk * d2kappa)
-        band_r = band
-        kd = band_r.shape[1] - 1
-        offset = 2 * (i - 1)
-        # lower triangle of outer_coeff·∇φ∇φᵀ + g·∇²φ, row a, column b ≤ a, over (s, z) of nodes i−1, i, i+1
-        band_r[offset + 0, kd - 0] += outer_coeff * gp0 * gp0 + g * (-he0)
-        band_r[offset + 1, kd - 1] += outer_coeff * gp1 * gp0 + g * (-he1)
-        band_r[offset + 1, kd - 0] += outer_coeff * gp1 * gp1 + g * (-he2)
-        band_r[offset + 2, kd - 2] += outer_coeff * gp2 * gp0 + g * (he0)
-        band_r[offset + 2, kd - 1] += outer_coeff * gp2 * gp1 + g * (he1)
-        band_r[offset + 2, kd - 0] += outer_coeff * gp2 * gp2 + g * (hf0 - he0)
-        band_r[offset + 3, kd - 3] += outer_coeff * gp3 * gp0 + g * (he1)
-        band_r[offset + 3, kd - 2] += outer_coeff * gp3 * gp1 + g * (he2)
-        band_r[offset + 3, kd - 1] += outer_coeff * gp3 * gp2 + g * (hf1 - he1)
-        band_r[offset + 3, kd - 0] += outer_coeff * gp3 * gp3 + g * (hf2 - he2)
-        band_r[offset + 4, kd - 4] += outer_coeff * gp4 * gp0
-        band_r[offset + 4, kd - 3] += outer_coeff * gp4 * gp1
-        band_r[offset + 4, kd - 2] += outer_coeff * gp4 * gp2 + g * (-hf0)
-        band_r[offset + 4, kd - 1] += outer_coeff * gp4 * gp3 + g * (-hf1)
-        band_r[offset + 4, kd - 0] += outer_coeff * gp4 * gp4 + g * (hf0)
-        band_r[offset + 5, kd - 5] += outer_coeff * gp5 * gp0
-        band_r[offset + 5, kd - 4] += outer_coeff * gp5 * gp1
-        band_r[offset + 5, kd - 3] += outer_coeff * gp5 * gp2 + g * (-hf1)
-        band_r[offset + 5, kd - 2] += outer_coeff * gp5 * gp3 + g * (-hf2)
-        band_r[offset + 5, kd - 1] += outer_coeff * gp5 * gp4 + g * (hf1)
-        band_r[offset + 5, kd - 0] += outer_coeff * gp5 * gp5 + g * (hf2)
-    return energy
+    gradient = (g * gp0, g * gp1, g * gp2, g * gp3, g * gp4, g * gp5)
+    # ∂²θ/∂e² = [[2 e_s e_z, e_z² − e_s²], [e_z² − e_s², −2 e_s e_z]]/|e|⁴, stored as (ss, sz, zz);
+    # φ = θ(f) − θ(e) couples nodes (0, 1) through e and (1, 2) through f.
+    e4 = e2 * e2
+    f4 = f2 * f2
+    he0, he1, he2 = 2.0 * ex * ez / e4, (ez * ez - ex * ex) / e4, -2.0 * ex * ez / e4
+    hf0, hf1, hf2 = 2.0 * fx * fz / f4, (fz * fz - fx * fx) / f4, -2.0 * fx * fz / f4
+    d2kappa = 0.5 * kappa * dkappa  # d²κ/dφ²
+    c = k * (dkappa * dkappa + dk * d2kappa)
+    # outer_coeff·∇φ∇φᵀ + g·∇²φ, row a, column b ≤ a
+    hessian = (c * gp0 * gp0 + g * (-he0),
+               c * gp1 * gp0 + g * (-he1), c * gp1 * gp1 + g * (-he2),
+               c * gp2 * gp0 + g * (he0), c * gp2 * gp1 + g * (he1), c * gp2 * gp2 + g * (hf0 - he0),
+               c * gp3 * gp0 + g * (he1), c * gp3 * gp1 + g * (he2), c * gp3 * gp2 + g * (hf1 - he1),
+               c * gp3 * gp3 + g * (hf2 - he2),
+               c * gp4 * gp0, c * gp4 * gp1, c * gp4 * gp2 + g * (-hf0), c * gp4 * gp3 + g * (-hf1),
+               c * gp4 * gp4 + g * (hf0),
+               c * gp5 * gp0, c * gp5 * gp1, c * gp5 * gp2 + g * (-hf1), c * gp5 * gp3 + g * (-hf2),
+               c * gp5 * gp4 + g * (hf1), c * gp5 * gp5 + g * (hf2))
+    return energy, gradient, hessian
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -138,11 +104,39 @@ def planar_elastic_rod(q, rest_length, stretch_stiffness, bend_stiffness, vorono
     """
     energy = 0.0
     n_nodes = q.shape[0]
+    kd = band.shape[1] - 1
     for i in range(n_nodes - 1):
-        energy += _stretch(q, i, rest_length[i], stretch_stiffness[i], force, band, accumulate_hessian)
+        edge_energy, pull_s, pull_z, kss, ksz, kzz = _stretch(q, i, rest_length[i], stretch_stiffness[i])
+        energy += edge_energy
+        force[i, 0] += pull_s
+        force[i, 1] += pull_z
+        force[i + 1, 0] -= pull_s
+        force[i + 1, 1] -= pull_z
+        if accumulate_hessian:
+            o = 2 * i
+            # lower triangle of [[K, −K], [−K, K]] over (s, z) of nodes i, i+1
+            band[o, kd] += kss
+            band[o + 1, kd - 1] += ksz
+            band[o + 1, kd] += kzz
+            band[o + 2, kd - 2] -= kss
+            band[o + 2, kd - 1] -= ksz
+            band[o + 2, kd] += kss
+            band[o + 3, kd - 3] -= ksz
+            band[o + 3, kd - 2] -= kzz
+            band[o + 3, kd - 1] += ksz
+            band[o + 3, kd] += kzz
     for i in range(1, n_nodes - 1):
-        energy += _bend(q, i, bend_stiffness[i] / voronoi_length[i], natural_curvature, force, band,
-                        accumulate_hessian)
+        node_energy, gradient, hessian = _bend(q, i, bend_stiffness[i] / voronoi_length[i], natural_curvature)
+        energy += node_energy
+        offset = 2 * (i - 1)
+        for a in range(6):
+            force[i - 1 + a // 2, a % 2] -= gradient[a]
+        if accumulate_hessian:
+            entry = 0
+            for a in range(6):
+                for b in range(a + 1):
+                    band[offset + a, kd - a + b] += hessian[entry]
+                    entry += 1
     return energy
 
 
