@@ -49,11 +49,25 @@ def factor_banded_symmetric(a, free, row_scratch):
     for i in range(n):  # row-oriented LDLᵀ: t_k = L[i,k]·d_k, then L[i,k] = t_k/d_k
         j0 = max(0, i - kd)
         row = a[i]
-        for k in range(j0, i):
-            rk = a[k]
+        # t_k = A[i,k] − Σ_{m<k} t_m·L[k,m], each sum in ascending m, two k's at a time: their sums share the terms
+        # m < k, two chains the CPU overlaps, where one k at a time waits on each subtraction's latency (the same
+        # subtractions in the same order; a tenth off the 3-D factorisation, nothing planar; four at a time gained
+        # no more)
+        for k in range(j0, i - 1, 2):
+            s0 = row[kd - i + k]
+            s1 = row[kd - i + k + 1]
+            for m in range(j0, k):
+                tm = t[m - j0]
+                s0 -= tm * a[k, kd - k + m]
+                s1 -= tm * a[k + 1, kd - k - 1 + m]
+            s1 -= s0 * a[k + 1, kd - 1]  # its last term, m = k
+            t[k - j0] = s0
+            t[k + 1 - j0] = s1
+        if (i - j0) % 2:
+            k = i - 1
             s = row[kd - i + k]
             for m in range(j0, k):
-                s -= t[m - j0] * rk[kd - k + m]
+                s -= t[m - j0] * a[k, kd - k + m]
             t[k - j0] = s
         d = row[kd]
         for k in range(j0, i):
