@@ -25,15 +25,18 @@ caller). That shows where a step's reference counts are worth removing. Needs gd
 also gives each operation to the line of Python source whose code makes it (a line of a function Numba inlined
 counts as its own). For that the child compiles the package with Numba's debug information
 (``NUMBA_DEBUGINFO=1``, less the rest of Numba's debug mode, which keeps variables alive longer, checks bounds and
-stops inlining, and so changes the counts), into a cache of its own under ``out/refcounts_debug_cache`` so that the
-package's cache is not touched (the first run compiles everything, ten minutes or more), and ``addr2line`` reads the
-lines from the object's line table. The totals should match a run without ``--lines``; the JSON holds both views.
+stops inlining, and so changes the counts), into a cache of its own under ``out/refcounts_debug_cache``, a folder
+per version of the package's source, so that the package's cache is not touched and no edit is counted stale (the
+first run of a version compiles everything, ten minutes or more, then counts in a second run that loads it all), and
+``addr2line`` reads the lines from the object's line table. The totals should match a run without ``--lines``; the
+JSON holds both views.
 """
 
 from __future__ import annotations
 
 import argparse
 import bisect
+import hashlib
 import json
 import os
 import re
@@ -111,6 +114,7 @@ for _ in range(12):
 code = [value for owner, value in objects if owner is result.library]
 if not code:  # compiled in this process rather than loaded from the cache: the library holds it
     code = [bytes(result.library._get_compiled_object())]
+    Path(object_file + '.compiled').write_text('')  # and the other libraries' objects went uncaptured
 Path(object_file).write_bytes(code[-1])
 symbols = function_symbols(Path(object_file))
 # the object's code lies at its entry point's address less that function's offset in it; the object links in its
@@ -203,7 +207,23 @@ def by_function(returns: list[tuple[int, int]], symbols: dict[str, tuple[int, in
 
 
 DEBUG_CACHE = ROOT / "out" / "refcounts_debug_cache"
-"""Where ``--lines`` keeps the package compiled with debug information."""
+"""Where ``--lines`` keeps the package compiled with debug information, in a folder per version of its source
+(:func:`debug_cache`)."""
+
+
+def debug_cache(tree: Path) -> Path:
+    """The debug build's cache for ``tree``'s package as its source is now, the others removed. Numba checks a
+    cached function against its own file only, not against the files of what it inlined, so a cache kept across
+    edits of another file would count the old code."""
+    digest = hashlib.sha256()
+    for path in sorted((tree / "soft_gripper_env").rglob("*.py")):
+        digest.update(str(path.relative_to(tree)).encode() + b"\0" + path.read_bytes())
+    folder = DEBUG_CACHE / digest.hexdigest()[:16]
+    if DEBUG_CACHE.exists():
+        for other in DEBUG_CACHE.iterdir():
+            if other != folder:
+                shutil.rmtree(other) if other.is_dir() else other.unlink()
+    return folder
 
 
 def source_lines(objects: list[tuple[Path, int]], returns: list[tuple[int, int]]) -> dict[str, int]:
@@ -242,10 +262,16 @@ def count_env(tree: Path, model: str, steps: int, lines: bool = False) -> dict:
         script.write_text(_ENV_GDB.format(address_file=str(address_file), counts_file=str(counts_file)))
         environment = dict(os.environ)
         if lines:
-            environment.update(NUMBA_DEBUGINFO="1", NUMBA_CACHE_DIR=str(DEBUG_CACHE))
-        done = subprocess.run(["gdb", "-q", "-batch", "-x", str(script), "--args", sys.executable, "-c", _ENV_CHILD,
-                               str(tree), model, str(steps), str(address_file), str(object_file)],
-                              cwd=tree, capture_output=True, text=True, timeout=3600, env=environment)
+            environment.update(NUMBA_DEBUGINFO="1", NUMBA_CACHE_DIR=str(debug_cache(tree)))
+        # a run that compiles the package sees only the control interval's object, not the other libraries' that
+        # the lines need: with --lines it fills the cache, and a second run, which loads everything from it, counts
+        for _ in range(2 if lines else 1):
+            done = subprocess.run(["gdb", "-q", "-batch", "-x", str(script), "--args", sys.executable, "-c",
+                                   _ENV_CHILD, str(tree), model, str(steps), str(address_file), str(object_file)],
+                                  cwd=tree, capture_output=True, text=True, timeout=3600, env=environment)
+            if not Path(f"{object_file}.compiled").exists():
+                break
+            Path(f"{object_file}.compiled").unlink()
         if not counts_file.exists():
             raise RuntimeError(f"gdb wrote no counts:\n{(done.stdout + done.stderr)[-3000:]}")
         returns = [(int(address), int(n)) for address, n in json.loads(counts_file.read_text())]

@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks import refcounts
 from benchmarks.compare_commits import higher_is_faster, measurements, paired_case, plot_ratios, run_benchmark
 from benchmarks.profile_env import RUNTIME_BLOCK, attribute
-from benchmarks.refcounts import by_function, demangle, hits
+from benchmarks.refcounts import by_function, debug_cache, demangle, hits
 from benchmarks.speed_vs_error import (
     OUTCOME_DEFAULT,
     OUTCOME_REFERENCE,
@@ -289,3 +290,19 @@ def test_profile_gives_each_sample_to_a_compiled_function_the_reference_counts_o
     assert attribute(samples, base, symbols, runtime) == {
         "kernels.forces.morison_drag": 2, "runtime (reference counts)": 2, "unknown": 2,
         "solvers.stepping.take_steps": 1, "_PyEval_EvalFrameDefault": 1}
+
+
+def test_refcounts_debug_cache_is_a_folder_per_version_of_the_source(tmp_path, monkeypatch):
+    monkeypatch.setattr(refcounts, "DEBUG_CACHE", tmp_path / "cache")
+    tree = tmp_path / "tree"
+    (tree / "soft_gripper_env" / "physics").mkdir(parents=True)
+    kernel = tree / "soft_gripper_env" / "physics" / "kernel.py"
+    kernel.write_text("x = 1\n")
+    first = debug_cache(tree)
+    first.mkdir(parents=True)
+    assert debug_cache(tree) == first and first.exists()  # the same source: the same cache, kept
+    kernel.write_text("x = 2\n")  # an edit in any file of the package, whose functions others may inline
+    second = debug_cache(tree)
+    assert second != first and not first.exists()  # a new cache, and the stale one gone
+    (tree / "soft_gripper_env" / "README.txt").write_text("not source")
+    assert debug_cache(tree) == second
