@@ -185,7 +185,8 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, st
     te_tt = _axpy(1.0, te, 1.0, tt)
     tf_tt = _axpy(1.0, tf, 1.0, tt)
     # the loop below reads its 3-vectors from rows of ``vectors``: a tuple indexed by a loop variable compiles to a
-    # branch per read, which made this loop cost twice what it does now (the same values and arithmetic)
+    # branch per read, and this loop is too large for LLVM to unroll them away; read from tuples, the rod's assembly
+    # with its Hessian took about 1.6 times as long (the same values and arithmetic)
     v = vectors
     for row, vector in enumerate((tt, te, tf, kb, m1e, m2e, m1f, m2f, d1t, d2t, tf_x_d2t, te_x_d2t, tf_x_d1t,
                                   te_x_d1t, te_tt, tf_tt)):

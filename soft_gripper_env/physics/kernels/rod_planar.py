@@ -82,7 +82,7 @@ def _bend(q, i, k, kappa_bar):
     hf0, hf1, hf2 = 2.0 * fx * fz / f4, (fz * fz - fx * fx) / f4, -2.0 * fx * fz / f4
     d2kappa = 0.5 * kappa * dkappa  # d²κ/dφ²
     c = k * (dkappa * dkappa + dk * d2kappa)
-    # outer_coeff·∇φ∇φᵀ + g·∇²φ, row a, column b ≤ a
+    # c·∇φ∇φᵀ + g·∇²φ with c = d²E/dφ², row a, column b ≤ a
     hessian = (c * gp0 * gp0 + g * (-he0),
                c * gp1 * gp0 + g * (-he1), c * gp1 * gp1 + g * (-he2),
                c * gp2 * gp0 + g * (he0), c * gp2 * gp1 + g * (he1), c * gp2 * gp2 + g * (hf0 - he0),
@@ -129,6 +129,8 @@ def planar_elastic_rod(q, rest_length, stretch_stiffness, bend_stiffness, vorono
         node_energy, gradient, hessian = _bend(q, i, bend_stiffness[i] / voronoi_length[i], natural_curvature)
         energy += node_energy
         offset = 2 * (i - 1)
+        # these small loops read their tuples at a loop index too, through a switch, which here costs nothing that
+        # shows: the same 27 writes spelled out one by one took the same time
         for a in range(6):
             force[i - 1 + a // 2, a % 2] -= gradient[a]
         if accumulate_hessian:
