@@ -9,15 +9,16 @@ from soft_gripper_env.physics.solvers.newton import eliminate_rods
 N_NODES = 20
 
 
-def _system(stride: int, seed: int):
-    """A symmetric positive definite Newton matrix of one rod, dense (n, n) and in band storage (n, kd+1)."""
+def _system(stride: int, seed: int, shape: tuple[int, int] | None = None):
+    """A symmetric positive definite Newton matrix of one rod, dense (n, n) and in band storage (n, kd+1); ``shape``
+    (n, kd) overrides the rod's."""
     rng = np.random.default_rng(seed)
-    n, kd = N_NODES * stride, 3 * stride - 1
+    n, kd = shape if shape is not None else (N_NODES * stride, 3 * stride - 1)
     dense = np.zeros((n, n))
     for i in range(n):
         for j in range(max(0, i - kd), i + 1):
             dense[i, j] = dense[j, i] = rng.normal()
-    dense += np.eye(n) * 4.0 * kd  # diagonally dominant, as the mass term makes it
+    dense += np.eye(n) * 4.0 * (kd + 1)  # diagonally dominant, as the mass term makes it
     band = np.zeros((n, kd + 1))
     for i in range(n):
         for j in range(max(0, i - kd), i + 1):
@@ -53,6 +54,25 @@ def test_solve_from_a_first_row_is_the_full_solve():
     factored = band.copy()
     assert factor_banded_symmetric(factored, free, np.empty(band.shape[1]))
     for first in (0, 1, 37, n - 1):
+        rhs = np.zeros(n)
+        rhs[first:] = rng.normal(size=n - first)
+        full, partial = rhs.copy(), rhs.copy()
+        solve_factored(factored, full, free, 0)
+        solve_factored(factored, partial, free, first)
+        np.testing.assert_array_equal(partial, full)
+        np.testing.assert_allclose(full, _dense_solve(dense, rhs, free), rtol=1e-11, atol=1e-13)
+
+
+@pytest.mark.parametrize("shape", [(1, 0), (5, 0), (2, 1), (7, 1), (9, 2), (10, 3), (3, 5), (41, 5), (79, 10)])
+def test_paired_rows_at_every_edge(shape):
+    """The triangular passes take two rows at a time: odd and even sizes, a band as wide as the matrix or of zero
+    width, and every first row give the dense solution (and the same bits whatever the first row)."""
+    dense, band, rng = _system(1, 5, shape)
+    n = shape[0]
+    free = rng.random(n) > 0.2
+    factored = band.copy()
+    assert factor_banded_symmetric(factored, free, np.empty(band.shape[1]))
+    for first in range(n):
         rhs = np.zeros(n)
         rhs[first:] = rng.normal(size=n - first)
         full, partial = rhs.copy(), rhs.copy()
