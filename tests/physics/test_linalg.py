@@ -3,7 +3,12 @@
 import numpy as np
 import pytest
 
-from soft_gripper_env.physics.kernels.linalg import factor_banded_symmetric, solve_banded_symmetric_rod, solve_factored
+from soft_gripper_env.physics.kernels.linalg import (
+    factor_banded_symmetric,
+    solve_banded_symmetric_rod,
+    solve_factored,
+    solve_factored_six_columns,
+)
 from soft_gripper_env.physics.solvers.newton import eliminate_rods
 
 N_NODES = 20
@@ -82,6 +87,27 @@ def test_paired_rows_at_every_edge(shape):
         np.testing.assert_allclose(full, _dense_solve(dense, rhs, free), rtol=1e-11, atol=1e-13)
 
 
+@pytest.mark.parametrize("shape", [(1, 0), (6, 0), (9, 2), (3, 5), (40, 5), (79, 10)])
+def test_six_columns_are_six_solves(shape):
+    """The six right-hand sides solved together give each column the bits it gets alone, from every first row."""
+    _, band, rng = _system(1, 7, shape)
+    n = shape[0]
+    free = rng.random(n) > 0.2
+    factored = band.copy()
+    assert factor_banded_symmetric(factored, free, np.empty(band.shape[1]))
+    for first in range(n):
+        rhs = np.zeros((n, 6))
+        rhs[first:] = rng.normal(size=(n - first, 6))
+        together = rhs.copy()
+        solve_factored_six_columns(factored, together, free, first)
+        for k in range(6):
+            alone = rhs[:, k].copy()
+            solve_factored(factored, alone, free, first)
+            np.testing.assert_array_equal(together[:, k], alone)
+    with pytest.raises(ValueError, match="6 columns"):
+        solve_factored_six_columns(factored, np.zeros((n, 5)), free, 0)
+
+
 @pytest.mark.parametrize("stride", [2, 4])
 @pytest.mark.parametrize("held", [(15, 16, 17), (0, 1), (18, 19), (3, 12), ()])
 def test_eliminate_rods_matches_the_dense_schur_complement(stride, held):
@@ -100,7 +126,7 @@ def test_eliminate_rods_matches_the_dense_schur_complement(stride, held):
     minus_g = rng.normal(size=n)
     x0, x_coupling = minus_g[None].copy(), np.zeros((1, n, 6))
     block, rhs, factored = np.zeros((1, 6, 6)), np.zeros((1, 6)), np.zeros(1, dtype=bool)
-    scratch = (np.empty((n, 6)), np.empty(n), np.empty(band.shape[1]))
+    scratch = (np.empty((n, 6)), np.empty(band.shape[1]))
     failures = eliminate_rods(band[None].copy(), coupling[None], free[None], np.ones(1, dtype=bool),
                               np.ones(1, dtype=bool), x0, x_coupling, block, rhs, factored, scratch)
     assert failures == 0 and factored[0]

@@ -33,7 +33,7 @@ from ..kernels.assembly import StepInputs, assemble_rod, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
 from ..kernels.contact import along_surface, onto_surface, rotate_node, tangent_basis
 from ..kernels.finger_contact import any_near, near_fingers_of_gripper
-from ..kernels.linalg import factor_banded_symmetric, solve_factored, symmetric_band_entry
+from ..kernels.linalg import factor_banded_symmetric, solve_factored, solve_factored_six_columns, symmetric_band_entry
 from ..scene.forces import ForceTerms
 
 
@@ -142,8 +142,8 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
     residual, on entry; ``coupling`` (R, n, 6): S, the motion of each held DOF per unit body motion (zero on other
     DOFs); ``free`` (R, n): the DOFs solved for. Writes x0 = −A_FF⁻¹·G_F, the rod's own Newton step (R, n),
     X = A_FF⁻¹·(A·S)_F (R, n, 6), the rod's part of the body's matrix Sᵀ·A·S − (A·S)_Fᵀ·X into ``body_block``
-    (R, 6, 6), and (A·S)_Fᵀ·x0 into ``body_rhs`` (R, 6). ``scratch`` holds work arrays: A·S (n, 6), a column (n,)
-    and a band row (kd+1,).
+    (R, 6, 6), and (A·S)_Fᵀ·x0 into ``body_rhs`` (R, 6). ``scratch`` holds work arrays: A·S (n, 6) and a band row
+    (kd+1,).
     A rod that holds nothing (``coupled`` False, S = 0) only solves for x0, and leaves the other outputs as given
     (zero); a rod that is not ``active`` is left alone. Writes whether each rod's factorisation succeeded into
     ``factored`` and returns the number that failed.
@@ -154,7 +154,7 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
     """
     n_rods, n, kd1 = band.shape
     kd = kd1 - 1
-    product, column, row = scratch
+    product, row = scratch
     failures = 0
     for r in range(n_rods):
         if not active[r]:
@@ -188,11 +188,11 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
         solve_factored(a, x0[r], free[r], 0)
         if not coupled[r]:
             continue
-        for k in range(6):
-            for i in range(n):
-                column[i] = product[i, k] if free[r, i] else 0.0
-            solve_factored(a, column, free[r], first)
-            x_coupling[r, :, k] = column
+        columns = x_coupling[r]
+        for i in range(n):
+            for k in range(6):
+                columns[i, k] = product[i, k] if free[r, i] else 0.0
+        solve_factored_six_columns(a, columns, free[r], first)
         for k in range(6):
             total = 0.0
             for i in range(first, last + 1):
@@ -263,7 +263,6 @@ class _NewtonWork(NamedTuple):
     body_step: np.ndarray
     rotation: np.ndarray
     product: np.ndarray
-    column: np.ndarray
     band_row: np.ndarray
     normals: np.ndarray
     basis: np.ndarray
@@ -291,11 +290,11 @@ def _new_work(q, dim, n_fingers, coupled, contact, fingers):
         return _NewtonWork(*rods, np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)), np.empty((n_fingers, n, 6)),
                            np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)), np.zeros((n_fingers, n)),
                            ratios[0], flags[0], flags[1], flags[2], np.empty(6), np.empty((6, 6)), np.empty(6),
-                           np.empty(6), np.empty((3, 3)), np.empty((n, 6)), np.empty(n), np.empty(band_width + 1),
+                           np.empty(6), np.empty((3, 3)), np.empty((n, 6)), np.empty(band_width + 1),
                            *surface)
     rod_delta = np.zeros((n_fingers, n)) if fingers else matrix
     return _NewtonWork(*rods, tensor, np.empty((n_fingers, n)), tensor, tensor, matrix, rod_delta, ratios[0], flags[0],
-                       flags[1], flags[2], vector, matrix, vector, vector, matrix, matrix, vector,
+                       flags[1], flags[2], vector, matrix, vector, vector, matrix, matrix,
                        np.empty(band_width + 1), *surface)
 
 
@@ -402,7 +401,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
         rods_in = slice(first, first + n_fingers)
         failures = eliminate_rods(work.bands, work.coupling, free[rods_in], touching, active, work.x0,
                                   work.x_coupling, work.block, work.rhs, factored,
-                                  (work.product, work.column, work.band_row))
+                                  (work.product, work.band_row))
         if holds is not None:
             _unrotate_steps(first, holds, work)
         if coupling is not None:
