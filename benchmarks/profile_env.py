@@ -1,8 +1,10 @@
 """Where an env step's time goes, by compiled function: a sampling profile of the environment under ``perf``.
 
-    python -m benchmarks.profile_env [--model planar|3d] [--envs 64] [--steps 100] [--json out/profile_env.json]
+    python -m benchmarks.profile_env [--model planar|3d] [--envs 64] [--steps 100] [--policy random|reactive]
+                                     [--json out/profile_env.json]
 
-It runs ``SoftGripperUnderwater-v0`` (one env, or ``gym.make_vec`` with ``--envs``) on random actions in a child
+It runs ``SoftGripperUnderwater-v0`` (one env, or ``gym.make_vec`` with ``--envs``) on random actions, or grasping
+under the reactive controller (``agents.scripted.ReactivePolicy``, as ``env_speed``'s grasping figures), in a child
 process under ``perf record``, one Numba and one BLAS thread, and gives each sample to the function whose code
 holds it: the compiled control interval's functions (``solvers.stepping.take_steps`` and everything Numba or LLVM
 linked into it, read from its object code as Numba loads it, as :mod:`benchmarks.refcounts` does), or the symbol
@@ -34,6 +36,9 @@ RUNTIME_BLOCK = 64
 """Bytes from ``NRT_incref``'s start within which a sample counts as the reference counts (the two functions and
 the atomic helpers they call lie together in the runtime's module)."""
 
+POLICIES = ("random", "reactive")
+"""What drives the profiled env: random actions, or the reactive controller grasping."""
+
 PERF_ATTACH_S = 0.5
 """Seconds given ``perf record`` to attach to the child before its timed steps begin."""
 
@@ -41,7 +46,7 @@ _CHILD = """
 import json, os, sys, time
 os.environ.setdefault('NUMBA_NUM_THREADS', '1')
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
-model, envs, steps, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+model, envs, steps, out, policy = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5]
 import numba.core.codegen as codegen
 objects = []
 set_compiled_object = codegen.CPUCodeLibrary._set_compiled_object
@@ -57,13 +62,20 @@ from soft_gripper_env.physics.solvers import stepping
 from benchmarks.refcounts import function_symbols
 env = (gym.make(soft_gripper_env.ENV_ID, model=model) if envs == 1 else
        gym.make_vec(soft_gripper_env.ENV_ID, num_envs=envs, model=model))
+if policy == 'reactive':
+    from agents.scripted import ReactivePolicy
+    from soft_gripper_env.grasp_task import GraspTask
+    act = ReactivePolicy(GraspTask(model=model))
+else:
+    act = lambda observation: env.action_space.sample()
 env.action_space.seed(0)
-env.reset(seed=0)
+observation, _ = env.reset(seed=0)
 def run(n):
+    global observation
     for _ in range(n):
-        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        observation, _, terminated, truncated, _ = env.step(act(observation))
         if envs == 1 and (terminated or truncated):
-            env.reset()
+            observation, _ = env.reset()
 run(12)
 (result,) = stepping.take_steps.overloads.values()
 code = [value for owner, value in objects if owner is result.library] or [bytes(result.library._get_compiled_object())]
@@ -103,11 +115,14 @@ def attribute(samples: list[tuple[int, str]], base: int, symbols: dict[str, tupl
     return dict(sorted(totals.items(), key=lambda item: -item[1]))
 
 
-def profile(model: str, envs: int, steps: int, frequency: int) -> dict:
-    """Runs the child under ``perf record`` and returns the share of samples per function."""
+def profile(model: str, envs: int, steps: int, frequency: int, policy: str = "random") -> dict:
+    """Runs the child under ``perf record`` and returns the share of samples per function; ``policy`` is
+    ``"random"`` or ``"reactive"``."""
+    if policy not in POLICIES:
+        raise ValueError(f"policy = {policy!r} must be one of {POLICIES}")
     with tempfile.TemporaryDirectory() as tmp:
         out, data = str(Path(tmp) / "interval"), Path(tmp) / "perf.data"
-        child = subprocess.Popen([sys.executable, "-c", _CHILD, model, str(envs), str(steps), out], cwd=ROOT,
+        child = subprocess.Popen([sys.executable, "-c", _CHILD, model, str(envs), str(steps), out, policy], cwd=ROOT,
                                  env={**os.environ, "PYTHONPATH": str(ROOT)}, stdin=subprocess.PIPE,
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
@@ -139,7 +154,7 @@ def profile(model: str, envs: int, steps: int, frequency: int) -> dict:
         totals = attribute(samples, where["base"], function_symbols(Path(out + ".o")), where["incref"])
         seconds = float(Path(out + ".time").read_text())
     count = sum(totals.values())
-    return {"model": model, "envs": envs, "steps": steps, "env_steps_per_s": steps * envs / seconds,
+    return {"model": model, "envs": envs, "steps": steps, "policy": policy, "env_steps_per_s": steps * envs / seconds,
             "samples": count, "share_by_function": {name: n / count for name, n in totals.items()}}
 
 
@@ -148,6 +163,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--model", choices=("planar", "3d"), default="planar")
     parser.add_argument("--envs", type=int, default=64, help="1 for one env, else make_vec's size (default 64)")
     parser.add_argument("--steps", type=int, default=100, help="timed actions (default 100)")
+    parser.add_argument("--policy", choices=POLICIES, default="random",
+                        help="random actions, or the reactive controller grasping (default random)")
     parser.add_argument("--frequency", type=int, default=4000, help="samples per second (default 4000)")
     parser.add_argument("--json", type=Path, help="write the profile to this JSON file")
     args = parser.parse_args(argv)
@@ -159,8 +176,8 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--frequency = {args.frequency} Hz must be within [100, 20000]")
     _require(parser, "perf", "readelf")
     what = "one env" if args.envs == 1 else f"make_vec({args.envs})"
-    print(f"profiling {args.steps} actions of {what}, {args.model} ...", flush=True)
-    result = profile(args.model, args.envs, args.steps, args.frequency)
+    print(f"profiling {args.steps} {args.policy} actions of {what}, {args.model} ...", flush=True)
+    result = profile(args.model, args.envs, args.steps, args.frequency, args.policy)
     print(f"\n{result['samples']:,} samples, {result['env_steps_per_s']:,.0f} env steps/s while sampled; by function:")
     for name, share in list(result["share_by_function"].items())[:30]:
         print(f"{100 * share:6.2f} %  {name}")

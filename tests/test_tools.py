@@ -12,7 +12,7 @@ import pytest
 
 from benchmarks import refcounts
 from benchmarks.compare_commits import higher_is_faster, measurements, paired_case, plot_ratios, run_benchmark
-from benchmarks.profile_env import RUNTIME_BLOCK, attribute
+from benchmarks.profile_env import RUNTIME_BLOCK, attribute, profile
 from benchmarks.refcounts import by_function, debug_cache, demangle, hits
 from benchmarks.speed_vs_error import (
     OUTCOME_DEFAULT,
@@ -290,6 +290,11 @@ def test_profile_gives_each_sample_to_a_compiled_function_the_reference_counts_o
     assert attribute(samples, base, symbols, runtime) == {
         "kernels.forces.morison_drag": 2, "runtime (reference counts)": 2, "unknown": 2,
         "solvers.stepping.take_steps": 1, "_PyEval_EvalFrameDefault": 1}
+
+
+def test_profile_refuses_a_policy_it_does_not_know():
+    with pytest.raises(ValueError, match="policy = 'ppo' must be one of"):
+        profile("planar", 1, 1, 1000, policy="ppo")
 
 
 def test_refcounts_debug_cache_is_a_folder_per_version_of_the_source(tmp_path, monkeypatch):
