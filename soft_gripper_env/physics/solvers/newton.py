@@ -174,12 +174,18 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
                         continue
                     for k in range(6):
                         product[i, k] += value * s[j, k]
-            for k in range(6):
-                for m in range(6):
-                    total = 0.0
-                    for i in range(held_first, held_last + 1):
-                        total += s[i, k] * product[i, m]
-                    body_block[r, k, m] = total
+            for k in range(6):  # six sums at once, each in ascending i (see below)
+                t0 = t1 = t2 = t3 = t4 = t5 = 0.0
+                for i in range(held_first, held_last + 1):
+                    sik = s[i, k]
+                    t0 += sik * product[i, 0]
+                    t1 += sik * product[i, 1]
+                    t2 += sik * product[i, 2]
+                    t3 += sik * product[i, 3]
+                    t4 += sik * product[i, 4]
+                    t5 += sik * product[i, 5]
+                body_block[r, k, 0], body_block[r, k, 1], body_block[r, k, 2] = t0, t1, t2
+                body_block[r, k, 3], body_block[r, k, 4], body_block[r, k, 5] = t3, t4, t5
         factored[r] = factor_banded_symmetric(a, free[r], row)
         if not factored[r]:
             failures += 1
@@ -193,18 +199,27 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
             for k in range(6):
                 columns[i, k] = product[i, k] if free[r, i] else 0.0
         solve_factored_six_columns(a, columns, free[r], first)
+        # (A·S)_Fᵀ·x0 and (A·S)_Fᵀ·X: seven sums per column of A·S at once, each in ascending i as one at a time
+        # would take it (the same bits), seven chains where one waited on each addition's latency
         for k in range(6):
-            total = 0.0
+            total = t0 = t1 = t2 = t3 = t4 = t5 = 0.0
             for i in range(first, last + 1):
                 if free[r, i]:
-                    total += product[i, k] * x0[r, i]
+                    p = product[i, k]
+                    total += p * x0[r, i]
+                    t0 += p * columns[i, 0]
+                    t1 += p * columns[i, 1]
+                    t2 += p * columns[i, 2]
+                    t3 += p * columns[i, 3]
+                    t4 += p * columns[i, 4]
+                    t5 += p * columns[i, 5]
             body_rhs[r, k] = total
-            for m in range(6):
-                total = 0.0
-                for i in range(first, last + 1):
-                    if free[r, i]:
-                        total += product[i, k] * x_coupling[r, i, m]
-                body_block[r, k, m] -= total
+            body_block[r, k, 0] -= t0
+            body_block[r, k, 1] -= t1
+            body_block[r, k, 2] -= t2
+            body_block[r, k, 3] -= t3
+            body_block[r, k, 4] -= t4
+            body_block[r, k, 5] -= t5
     return failures
 
 
