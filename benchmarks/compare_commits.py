@@ -137,20 +137,27 @@ import json
 import os
 import time
 clock = time.process_time if sys.argv[2] == 'cpu' else time.perf_counter
-model, num_envs, repeats, steps = sys.argv[3], int(sys.argv[4]), int(sys.argv[5]), int(sys.argv[6])
+model, num_envs, repeats, steps, policy = sys.argv[3], int(sys.argv[4]), int(sys.argv[5]), int(sys.argv[6]), sys.argv[7]
 os.environ.setdefault('NUMBA_NUM_THREADS', '1')
 sys.path[:0] = [tree]
 import gymnasium as gym
 import soft_gripper_env
 env = (gym.make(soft_gripper_env.ENV_ID, model=model) if num_envs == 1 else
        gym.make_vec(soft_gripper_env.ENV_ID, num_envs=num_envs, model=model))
+if policy == 'reactive':
+    from agents.scripted import ReactivePolicy
+    from soft_gripper_env.grasp_task import GraspTask
+    act = ReactivePolicy(GraspTask(model=model))
+else:
+    act = lambda observation: env.action_space.sample()
 env.action_space.seed(0)
-env.reset(seed=0)
+observation, _ = env.reset(seed=0)
 def run():
+    global observation
     for _ in range(steps):
-        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        observation, _, terminated, truncated, _ = env.step(act(observation))
         if num_envs == 1 and (terminated or truncated):
-            env.reset()
+            observation, _ = env.reset()
 run()  # compilation and first-call costs, outside the timing
 print('ready', flush=True)
 sys.stdin.readline()
@@ -162,10 +169,16 @@ for _ in range(repeats):
 print(json.dumps({'best_s': min(times), 'env_steps': steps * num_envs}), flush=True)
 """
 
-PAIRED_ENV_CASES = {"single_steps_per_s": ("planar", 1, 300), "single_3d_steps_per_s": ("3d", 1, 100),
-                    "vec64_steps_per_s": ("planar", 64, 12), "vec64_3d_steps_per_s": ("3d", 64, 4)}
+PAIRED_ENV_CASES = {"single_steps_per_s": ("planar", 1, 300, "random"),
+                    "single_3d_steps_per_s": ("3d", 1, 100, "random"),
+                    "vec64_steps_per_s": ("planar", 64, 12, "random"),
+                    "vec64_3d_steps_per_s": ("3d", 64, 4, "random"),
+                    "single_grasping_steps_per_s": ("planar", 1, 150, "reactive"),
+                    "single_3d_grasping_steps_per_s": ("3d", 1, 40, "reactive")}
 """``env_speed``'s one-thread measurements as the paired runs take them: {measurement: (rod model, envs, actions
-per timing)}, random actions from ``gym.make`` or ``gym.make_vec``, each timing about half a second to a second."""
+per timing, policy)}, random actions or the reactive controller grasping (``agents.scripted.ReactivePolicy``, from
+a reset: its first actions close the fingers on the sphere), from ``gym.make`` or ``gym.make_vec``, each timing
+about half a second to a second."""
 
 
 def paired_case(trees: dict[str, Path], cpus: dict[str, int], measurement: str, repeats: int,

@@ -164,7 +164,7 @@ class Fake(gym.Env):
         return np.zeros(1, np.float32), {{}}
 
     def step(self, action):
-        end = time.process_time() + STEP_S
+        end = time.process_time() + STEP_S * (2 if action[0] > 1 else 1)  # an action outside the space: twice
         while time.process_time() < end:  # busy: CPU time, as the paired runs measure it
             pass
         return np.zeros(1, np.float32), 0.0, False, False, {{}}
@@ -186,6 +186,44 @@ def test_paired_env_cases_report_env_steps_per_second_of_each_tree(tmp_path):
     cpus = sorted(os.sched_getaffinity(0))
     values = paired_case(trees, {"base": cpus[0], "this": cpus[-1]}, "single_steps_per_s", 2, "cpu")
     assert values["base"] == pytest.approx(1000.0, rel=0.2)
+    assert values["this"] == pytest.approx(500.0, rel=0.2)
+
+
+FAKE_POLICY = """
+import numpy as np
+
+
+class ReactivePolicy:
+    def __init__(self, task):
+        self.task = task
+
+    def __call__(self, observation):
+        return np.full(1, 2.0, np.float32)  # outside the action space: the fake env's step takes twice as long
+"""
+
+FAKE_TASK = """
+class GraspTask:
+    def __init__(self, model="planar"):
+        self.model = model
+"""
+
+
+def test_paired_grasping_cases_drive_the_env_with_the_reactive_controller_of_each_tree(tmp_path):
+    """The grasping cases take each tree's reactive controller: the fake env's step costs twice as long on its
+    actions as on random ones, so both trees read half of what random actions give."""
+    trees = {}
+    for side in ("base", "this"):
+        package = tmp_path / side / "soft_gripper_env"
+        package.mkdir(parents=True)
+        (package / "__init__.py").write_text(FAKE_ENV.format(side=side, step=0.001))
+        (package / "grasp_task.py").write_text(FAKE_TASK)
+        (tmp_path / side / "agents").mkdir()
+        (tmp_path / side / "agents" / "__init__.py").write_text("")
+        (tmp_path / side / "agents" / "scripted.py").write_text(FAKE_POLICY)
+        trees[side] = tmp_path / side
+    cpus = sorted(os.sched_getaffinity(0))
+    values = paired_case(trees, {"base": cpus[0], "this": cpus[-1]}, "single_grasping_steps_per_s", 2, "cpu")
+    assert values["base"] == pytest.approx(500.0, rel=0.2)
     assert values["this"] == pytest.approx(500.0, rel=0.2)
 
 
