@@ -12,9 +12,9 @@ linked into it, read from its object code as Numba loads it, as :mod:`benchmarks
 ``NRT_decref`` are the atomic reference counts, have no symbol ``perf`` can read; they count as
 ``runtime (reference counts)`` when they fall in the runtime's small block of code around those two functions.
 
-Only the timed steps count: sampling starts after the env is made and warmed up (a dozen steps). Shares are of
-the samples taken, so they do not depend on the machine's speed, though a busy machine adds its noise. Needs perf
-and readelf.
+Only the timed steps count: sampling starts after the env is made and warmed up (a dozen steps), and stops before the
+child exits (its shutdown is a full garbage collection and the freeing of every module). Shares are of the samples
+taken, so they do not depend on the machine's speed, though a busy machine adds its noise. Needs perf and readelf.
 """
 
 from __future__ import annotations
@@ -89,6 +89,8 @@ sys.stdin.readline()  # the parent is sampling
 start = time.perf_counter()
 run(steps)
 Path(out + '.time').write_text(str(time.perf_counter() - start))
+print('done', flush=True)
+sys.stdin.readline()  # the parent has stopped sampling: the interpreter's shutdown is not the env's time
 """
 
 
@@ -133,9 +135,10 @@ def profile(model: str, envs: int, steps: int, frequency: int, policy: str = "ra
             time.sleep(PERF_ATTACH_S)
             child.stdin.write("go\n")
             child.stdin.flush()
-            _, errors = child.communicate()
-            recorder.send_signal(signal.SIGINT)
-            recorder.wait()
+            child.stdout.readline()  # "done", or nothing if the child failed
+            recorder.send_signal(signal.SIGINT)  # before the child exits: its shutdown (a full garbage
+            recorder.wait()  # collection, freeing every module) took a sixth of a short run's samples
+            _, errors = child.communicate("exit\n")
             if child.returncode != 0:
                 raise RuntimeError(f"the env failed:\n{errors[-3000:]}")
         finally:
