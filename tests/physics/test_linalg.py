@@ -51,14 +51,13 @@ def test_banded_solve_matches_dense(stride):
     np.testing.assert_allclose(x, _dense_solve(dense, rhs, free), rtol=1e-12, atol=1e-14)
 
 
-def test_solve_from_a_first_row_is_the_full_solve():
-    """A right-hand side zero above row ``first`` solves to the same bits from there as from row 0."""
-    dense, band, rng = _system(4, 2)
+def _assert_solves_from_first_rows(dense, band, free, firsts, rng):
+    """For right-hand sides zero above each row in ``firsts``: the solve from that row has the bits of the solve
+    from row 0, and both the dense solution."""
     n = dense.shape[0]
-    free = np.ones(n, dtype=bool)
     factored = band.copy()
     assert factor_banded_symmetric(factored, free, np.empty(band.shape[1]))
-    for first in (0, 1, 37, n - 1):
+    for first in firsts:
         rhs = np.zeros(n)
         rhs[first:] = rng.normal(size=n - first)
         full, partial = rhs.copy(), rhs.copy()
@@ -66,6 +65,13 @@ def test_solve_from_a_first_row_is_the_full_solve():
         solve_factored(factored, partial, free, first)
         np.testing.assert_array_equal(partial, full)
         np.testing.assert_allclose(full, _dense_solve(dense, rhs, free), rtol=1e-11, atol=1e-13)
+
+
+def test_solve_from_a_first_row_is_the_full_solve():
+    """A right-hand side zero above row ``first`` solves to the same bits from there as from row 0."""
+    dense, band, rng = _system(4, 2)
+    n = dense.shape[0]
+    _assert_solves_from_first_rows(dense, band, np.ones(n, dtype=bool), (0, 1, 37, n - 1), rng)
 
 
 @pytest.mark.parametrize("shape", [(1, 0), (5, 0), (2, 1), (7, 1), (9, 2), (10, 3), (3, 5), (41, 5), (79, 10)])
@@ -74,17 +80,7 @@ def test_paired_rows_at_every_edge(shape):
     width, and every first row give the dense solution (and the same bits whatever the first row)."""
     dense, band, rng = _system(1, 5, shape)
     n = shape[0]
-    free = rng.random(n) > 0.2
-    factored = band.copy()
-    assert factor_banded_symmetric(factored, free, np.empty(band.shape[1]))
-    for first in range(n):
-        rhs = np.zeros(n)
-        rhs[first:] = rng.normal(size=n - first)
-        full, partial = rhs.copy(), rhs.copy()
-        solve_factored(factored, full, free, 0)
-        solve_factored(factored, partial, free, first)
-        np.testing.assert_array_equal(partial, full)
-        np.testing.assert_allclose(full, _dense_solve(dense, rhs, free), rtol=1e-11, atol=1e-13)
+    _assert_solves_from_first_rows(dense, band, rng.random(n) > 0.2, range(n), rng)
 
 
 @pytest.mark.parametrize("shape", [(1, 0), (6, 0), (9, 2), (3, 5), (40, 5), (79, 10)])

@@ -174,16 +174,8 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
                         continue
                     for k in range(6):
                         product[i, k] += value * s[j, k]
-            for k in range(6):  # six sums at once, each in ascending i (see below)
-                t0 = t1 = t2 = t3 = t4 = t5 = 0.0
-                for i in range(held_first, held_last + 1):
-                    sik = s[i, k]
-                    t0 += sik * product[i, 0]
-                    t1 += sik * product[i, 1]
-                    t2 += sik * product[i, 2]
-                    t3 += sik * product[i, 3]
-                    t4 += sik * product[i, 4]
-                    t5 += sik * product[i, 5]
+            for k in range(6):
+                t0, t1, t2, t3, t4, t5 = _six_sums(s, k, product, held_first, held_last, None)
                 body_block[r, k, 0], body_block[r, k, 1], body_block[r, k, 2] = t0, t1, t2
                 body_block[r, k, 3], body_block[r, k, 4], body_block[r, k, 5] = t3, t4, t5
         factored[r] = factor_banded_symmetric(a, free[r], row)
@@ -199,21 +191,13 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
             for k in range(6):
                 columns[i, k] = product[i, k] if free[r, i] else 0.0
         solve_factored_six_columns(a, columns, free[r], first)
-        # (A·S)_Fᵀ·x0 and (A·S)_Fᵀ·X: seven sums per column of A·S at once, each in ascending i as one at a time
-        # would take it (the same bits), seven chains where one waited on each addition's latency
-        for k in range(6):
-            total = t0 = t1 = t2 = t3 = t4 = t5 = 0.0
+        for k in range(6):  # (A·S)_Fᵀ·x0 and (A·S)_Fᵀ·X
+            total = 0.0
             for i in range(first, last + 1):
                 if free[r, i]:
-                    p = product[i, k]
-                    total += p * x0[r, i]
-                    t0 += p * columns[i, 0]
-                    t1 += p * columns[i, 1]
-                    t2 += p * columns[i, 2]
-                    t3 += p * columns[i, 3]
-                    t4 += p * columns[i, 4]
-                    t5 += p * columns[i, 5]
+                    total += product[i, k] * x0[r, i]
             body_rhs[r, k] = total
+            t0, t1, t2, t3, t4, t5 = _six_sums(product, k, columns, first, last, free[r])
             body_block[r, k, 0] -= t0
             body_block[r, k, 1] -= t1
             body_block[r, k, 2] -= t2
@@ -221,6 +205,24 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
             body_block[r, k, 4] -= t4
             body_block[r, k, 5] -= t5
     return failures
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _six_sums(a, k, b, first, last, rows):
+    """Σ_i a[i, k]·b[i, m] for m = 0 … 5, over the rows first … last (those where ``rows`` is True, or all where it is
+    None), each sum in ascending i. The six together, as six chains the CPU overlaps where one sum at a time waited
+    on each addition; the same bits as one at a time."""
+    t0 = t1 = t2 = t3 = t4 = t5 = 0.0
+    for i in range(first, last + 1):
+        if rows is None or rows[i]:
+            p = a[i, k]
+            t0 += p * b[i, 0]
+            t1 += p * b[i, 1]
+            t2 += p * b[i, 2]
+            t3 += p * b[i, 3]
+            t4 += p * b[i, 4]
+            t5 += p * b[i, 5]
+    return t0, t1, t2, t3, t4, t5
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
