@@ -30,6 +30,11 @@ per version of the package's source, so that the package's cache is not touched 
 first run of a version compiles everything, ten minutes or more, then counts in a second run that loads it all), and
 ``addr2line`` reads the lines from the object's line table. The totals should match a run without ``--lines``; the
 JSON holds both views.
+
+    python -m benchmarks.refcounts --env MODEL --allocations [--lines] [--json F]
+
+counts the arrays that compiled code allocates instead (calls of Numba's runtime allocators, :data:`ALLOCATORS`),
+by function, or line, the same way: each is a heap allocation and, later, its free.
 """
 
 from __future__ import annotations
@@ -77,10 +82,15 @@ for args in chosen:
 os.kill(os.getpid(), signal.SIGUSR1)
 """
 
-_ENV_CHILD = ISOLATE + """
+ALLOCATORS = ("NRT_MemInfo_alloc", "NRT_MemInfo_alloc_safe", "NRT_MemInfo_alloc_aligned",
+              "NRT_MemInfo_alloc_safe_aligned", "NRT_MemInfo_alloc_dtor_safe")
+"""The functions of Numba's runtime that compiled code calls to allocate an array (``np.empty`` and the like); each
+allocates and later frees on the heap, tens of nanoseconds or more."""
+
+_ENV_CHILD = ISOLATE + f"ALLOCATORS = {ALLOCATORS!r}\n" + """
 import json, os, signal
 sys.path[:0] = [tree]
-model, steps, address_file, object_file = sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5]
+model, steps, address_file, object_file, counted = sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5], sys.argv[6]
 os.environ.setdefault('NUMBA_NUM_THREADS', '1')
 import numba.core.codegen as codegen
 objects = []  # each library's machine code as Numba loads it (from its cache, or compiled)
@@ -121,8 +131,12 @@ symbols = function_symbols(Path(object_file))
 # own copies of NRT_incref and NRT_decref, which its code calls rather than the runtime's
 name = result.fndesc.llvm_func_name
 base = result.library.get_pointer_to_function(name) - symbols[name][0]
-targets = [rtsys.library.get_pointer_to_function(n) for n in ('NRT_incref', 'NRT_decref')]
-targets += [base + symbols[n][0] for n in ('NRT_incref', 'NRT_decref') if n in symbols]
+if counted == 'allocations':  # the runtime's C functions, which compiled code calls to allocate an array
+    import llvmlite.binding as llvm
+    targets = [llvm.address_of_symbol(n) for n in ALLOCATORS]
+else:
+    targets = [rtsys.library.get_pointer_to_function(n) for n in ('NRT_incref', 'NRT_decref')]
+    targets += [base + symbols[n][0] for n in ('NRT_incref', 'NRT_decref') if n in symbols]
 Path(address_file).write_text(' '.join(str(a) for a in [base] + targets))
 others = []  # every other library's object and where it lies, for the lines of code outside the interval's object
 for k, (owner, value) in enumerate(objects):
@@ -253,9 +267,10 @@ def source_lines(objects: list[tuple[Path, int]], returns: list[tuple[int, int]]
     return dict(sorted(totals.items(), key=lambda item: -item[1]))
 
 
-def count_env(tree: Path, model: str, steps: int, lines: bool = False) -> dict:
-    """Reference-count operations over ``steps`` env steps in ``model``: per env step, in all, by function and, with
-    ``lines``, by source line (compiled with debug information, :data:`DEBUG_CACHE`)."""
+def count_env(tree: Path, model: str, steps: int, lines: bool = False, allocations: bool = False) -> dict:
+    """Reference-count operations (or, with ``allocations``, calls of Numba's array allocators, :data:`ALLOCATORS`)
+    over ``steps`` env steps in ``model``: per env step, in all, by function and, with ``lines``, by source line
+    (compiled with debug information, :data:`DEBUG_CACHE`)."""
     with tempfile.TemporaryDirectory() as tmp:
         address_file, object_file, counts_file, script = (Path(tmp) / name for name in
                                                           ("address", "object.o", "counts.json", "count.gdb"))
@@ -267,7 +282,8 @@ def count_env(tree: Path, model: str, steps: int, lines: bool = False) -> dict:
         # the lines need: with --lines it fills the cache, and a second run, which loads everything from it, counts
         for _ in range(2 if lines else 1):
             done = subprocess.run(["gdb", "-q", "-batch", "-x", str(script), "--args", sys.executable, "-c",
-                                   _ENV_CHILD, str(tree), model, str(steps), str(address_file), str(object_file)],
+                                   _ENV_CHILD, str(tree), model, str(steps), str(address_file), str(object_file),
+                                   "allocations" if allocations else "refcounts"],
                                   cwd=tree, capture_output=True, text=True, timeout=3600, env=environment)
             if not Path(f"{object_file}.compiled").exists():
                 break
@@ -282,7 +298,8 @@ def count_env(tree: Path, model: str, steps: int, lines: bool = False) -> dict:
             others = [(Path(path), other) for path, other in json.loads(Path(f"{object_file}.others").read_text())]
             by_line = source_lines([(object_file, base)] + others, [(base + a, n) for a, n in returns])
     total = sum(functions.values())
-    result = {"model": model, "env_steps": steps, "per_env_step": total / steps,
+    result = {"model": model, "counted": "allocations" if allocations else "reference counts", "env_steps": steps,
+              "per_env_step": total / steps,
               "by_function_per_env_step": {name: n / steps for name, n in functions.items()}}
     if lines:
         result["by_line_per_env_step"] = {where: n / steps for where, n in by_line.items()}
@@ -338,11 +355,14 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--steps", type=int, default=1, help="env steps counted with --env (default 1)")
     parser.add_argument("--lines", action="store_true",
                         help="with --env, also by source line (compiles with debug information, cached apart)")
+    parser.add_argument("--allocations", action="store_true",
+                        help="with --env, count Numba's array allocations instead of reference counts")
     args = parser.parse_args(argv)
     if args.env is not None:
         return _main_env(parser, args)
-    if args.lines:
-        parser.error("--lines counts by source line within env steps: give --env MODEL with it")
+    for flag in ("lines", "allocations"):
+        if getattr(args, flag):
+            parser.error(f"--{flag} counts within env steps: give --env MODEL with it")
     if not 1 <= args.calls <= 10_000:
         parser.error(f"--calls = {args.calls} must be within [1, 10000]")
     _require(parser, "gdb")
@@ -398,11 +418,12 @@ def _main_env(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict
     _require(parser, "gdb", "readelf", *(("addr2line",) if args.lines else ()))
     print(f"counting {args.steps} env step(s), {args.env}" + (" by line (debug build, may compile first)"
                                                               if args.lines else "") + " ...", flush=True)
-    result = count_env(ROOT, args.env, args.steps, args.lines)
+    result = count_env(ROOT, args.env, args.steps, args.lines, args.allocations)
     total = result["per_env_step"]
+    counted = "array allocations" if args.allocations else "reference-count operations"
     for key, what in (("by_function_per_env_step", "function"), ("by_line_per_env_step", "source line")):
         if key in result:
-            print(f"\n{total:,.0f} reference-count operations per env step ({args.env}), by {what}:")
+            print(f"\n{total:,.0f} {counted} per env step ({args.env}), by {what}:")
             for name, n in list(result[key].items())[:25]:
                 print(f"{n:>10,.0f}  {100 * n / total:5.1f} %  {name}")
     _write_json(args.json, result)

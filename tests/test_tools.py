@@ -248,6 +248,21 @@ def test_refcounts_reads_each_breakpoints_hits_from_gdb_and_refuses_output_witho
         hits(listing.split("2       breakpoint")[0])
 
 
+def test_allocation_census_breaks_on_functions_the_runtime_has_and_needs_an_env(capsys):
+    """Every allocator the census sets a breakpoint on is a symbol of Numba's runtime once it has started (a name
+    that is not would break nowhere and count nothing), and --allocations without --env is refused by name."""
+    import llvmlite.binding as llvm
+    import numba
+    from numba.core.runtime import rtsys
+
+    numba.njit(lambda: 0)()  # starts the runtime, which registers its symbols
+    assert rtsys._init
+    assert all(llvm.address_of_symbol(name) for name in refcounts.ALLOCATORS)
+    with pytest.raises(SystemExit):
+        refcounts.main(["--allocations"])
+    assert "--allocations counts within env steps: give --env MODEL" in capsys.readouterr().err
+
+
 def test_refcounts_names_numbas_functions_and_gives_each_return_address_to_the_function_holding_it():
     mangled = ("_ZN16soft_gripper_env7physics7kernels7contact17contact_reactionsB4v317B56c8tJTIeFIjxB2IKSgI4CrvQCk0Z4y"
                "RYcWsBAK4JJIqUWsIgmAA_3d_3dE5ArrayIdLi3E1C7mutable7alignedE")
