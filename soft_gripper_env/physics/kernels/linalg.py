@@ -56,6 +56,7 @@ def factor_banded_symmetric(a, free, row_scratch):
         # them waited on each. Row i is indexed in place: a view of it, kept across these loops, cost reference
         # counts at every k. Kernel alone, planar and 3-D: the pairs and the indexing took a fifth off the
         # factorisation; the while loop for the range a further fifth, the pivot's terms in this loop a seventh
+        # planar and a tenth in 3-D
         k = j0
         while k + 1 < i:  # a range with a step of 2 here took a quarter longer (measured; not explained)
             s0 = a[i, kd - i + k]
