@@ -159,7 +159,7 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
     for r in range(n_rods):
         if not active[r]:
             continue
-        a = band[r]
+        a, rod_free = band[r], free[r]
         first, last = n, -1  # the rows where A·S may be non-zero: S's (the held DOFs) widened by the band
         if coupled[r]:  # Sᵀ·A·S needs A before it is factored
             s = coupling[r]
@@ -178,26 +178,26 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
                 t0, t1, t2, t3, t4, t5 = _six_sums(s, k, product, held_first, held_last, None)
                 body_block[r, k, 0], body_block[r, k, 1], body_block[r, k, 2] = t0, t1, t2
                 body_block[r, k, 3], body_block[r, k, 4], body_block[r, k, 5] = t3, t4, t5
-        factored[r] = factor_banded_symmetric(a, free[r], row)
+        factored[r] = factor_banded_symmetric(a, rod_free, row)
         if not factored[r]:
             failures += 1
             x0[r, :] = np.nan
             continue
-        solve_factored(a, x0[r], free[r], 0)
+        solve_factored(a, x0[r], rod_free, 0)
         if not coupled[r]:
             continue
         columns = x_coupling[r]
         for i in range(n):
             for k in range(6):
-                columns[i, k] = product[i, k] if free[r, i] else 0.0
-        solve_factored_six_columns(a, columns, free[r], first)
+                columns[i, k] = product[i, k] if rod_free[i] else 0.0
+        solve_factored_six_columns(a, columns, rod_free, first)
         for k in range(6):  # (A·S)_Fᵀ·x0 and (A·S)_Fᵀ·X
             total = 0.0
             for i in range(first, last + 1):
-                if free[r, i]:
+                if rod_free[i]:
                     total += product[i, k] * x0[r, i]
             body_rhs[r, k] = total
-            t0, t1, t2, t3, t4, t5 = _six_sums(product, k, columns, first, last, free[r])
+            t0, t1, t2, t3, t4, t5 = _six_sums(product, k, columns, first, last, rod_free)
             body_block[r, k, 0] -= t0
             body_block[r, k, 1] -= t1
             body_block[r, k, 2] -= t2
