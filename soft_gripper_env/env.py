@@ -80,7 +80,9 @@ def _observations(batch: GraspBatch, low: np.ndarray, high: np.ndarray) -> np.nd
     """(B, obs_dim) float32, a new array, clipped to the space (only a failing solver could leave it)."""
     parts = batch.observation_parts()  # in the full observation's order; the bounds are not rebuilt every step
     values = np.concatenate([parts[name] for name in _observed(batch.task, parts)], axis=1)
-    np.nan_to_num(values, copy=False, nan=0.0)  # in place: ``values`` is the concatenation's own new array
+    nan = np.isnan(values)
+    if nan.any():  # NaN becomes 0 (the bounds below clip ±inf); testing first costs a tenth of np.nan_to_num
+        values[nan] = 0.0
     return np.minimum(np.maximum(values, low, out=values), high, out=values).astype(np.float32)
 
 
@@ -94,7 +96,7 @@ def _check_actions(action, shape: tuple[int, ...]) -> np.ndarray:
         raise ValueError(f"action has shape {array.shape}; expected {shape} in [-1, 1]")
     if not np.isfinite(array).all():
         raise ValueError(f"action {array.tolist()} must be finite (no NaN or inf); allowed range [-1, 1]")
-    return np.clip(array, -1.0, 1.0)
+    return np.minimum(np.maximum(array, -1.0), 1.0)  # np.clip's arithmetic at a fraction of its call's cost
 
 
 def _infos(batch: GraspBatch, terms: dict[str, np.ndarray], failure: np.ndarray) -> dict[str, Any]:

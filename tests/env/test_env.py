@@ -238,6 +238,24 @@ def test_solver_failure_truncates_and_keeps_the_last_good_state(env, monkeypatch
     assert np.isfinite(reward)
 
 
+def test_observation_maps_nan_to_zero_and_clips_infinities(env):
+    """A value that is not finite never reaches the agent: NaN reads as 0 (clipped into the space), ±inf as the
+    bound; the other entries are untouched."""
+    from soft_gripper_env.env import _observations
+
+    obs, _ = env.reset(seed=3)
+    inner = env.unwrapped
+    batch, where = inner._batch, observation_slices(inner.task)["natural_curvature"]
+    batch.natural_curvature[0] = [np.nan, np.inf, -np.inf]
+    low, high = inner.observation_space.low[where], inner.observation_space.high[where]
+    after = _observations(batch, inner._low, inner._high)[0]
+    np.testing.assert_array_equal(after[where], [np.clip(0.0, low[0], high[0]), high[1], low[2]])
+    rest = np.ones(len(obs), dtype=bool)
+    rest[where] = False
+    np.testing.assert_array_equal(after[rest], obs[rest])
+    assert after.dtype == np.float32
+
+
 def test_rgb_frame_and_recorded_video(tmp_path):
     env = gym.make(ENV_ID, render_mode="rgb_array")
     env.reset(seed=0)
@@ -750,3 +768,20 @@ def test_finger_gap_follows_the_state_through_steps_and_resets():
         env.step(rng.uniform(-1.0, -0.5, (3, 3)).astype(np.float32))
     assert changed >= 8  # the gap moved with the fingers, and the comparison above saw new values
     env.close()
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), scale=st.floats(-8.0, 8.0), dtype=st.sampled_from([np.float64, np.float32]))
+def test_task_norms_and_finger_means_are_numpys_to_the_bit(seed, scale, dtype):
+    """The task's per-step helpers repeat NumPy's arithmetic exactly: norms as ``np.linalg.norm(axis=-1)``, finger
+    means as ``mean(axis=1)`` (in float32 for float32 actions, in float64 for bool)."""
+    from soft_gripper_env.grasp_task import _finger_mean, _norms
+
+    rng = np.random.default_rng(seed)
+    vectors = (rng.normal(size=(5, 3, 20, 3)) * 10.0**scale).astype(dtype)
+    np.testing.assert_array_equal(_norms(vectors), np.linalg.norm(vectors, axis=-1))
+    values = vectors[:, :, 0, 0]
+    for array in (values, values > 0):
+        mean, expected = _finger_mean(array), array.mean(axis=1)
+        assert mean.dtype == expected.dtype
+        np.testing.assert_array_equal(mean, expected)
