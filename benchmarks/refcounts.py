@@ -199,13 +199,14 @@ def demangle(name: str) -> str:
 
 
 def function_symbols(object_code: Path) -> dict[str, tuple[int, int]]:
-    """The functions an ELF object defines, name → (offset, size) [bytes], as ``readelf`` lists them."""
+    """The functions an ELF object defines, name → (offset, size) [bytes], as ``readelf`` lists them (a size of
+    100,000 bytes or more in hexadecimal)."""
     listing = subprocess.run(["readelf", "-sW", str(object_code)], capture_output=True, text=True, check=True).stdout
     symbols = {}
     for line in listing.splitlines():
         fields = line.split()
         if len(fields) >= 8 and fields[3] == "FUNC" and fields[6] != "UND":
-            symbols[fields[7]] = (int(fields[1], 16), int(fields[2]))
+            symbols[fields[7]] = (int(fields[1], 16), int(fields[2], 0))
     return symbols
 
 

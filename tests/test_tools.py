@@ -364,3 +364,20 @@ def test_refcounts_debug_cache_is_a_folder_per_version_of_the_source(tmp_path, m
     assert second != first and not first.exists()  # a new cache, and the stale one gone
     (tree / "soft_gripper_env" / "README.txt").write_text("not source")
     assert debug_cache(tree) == second
+
+
+def test_function_symbols_reads_readelf_sizes_in_decimal_and_hexadecimal(monkeypatch):
+    """readelf -sW prints a symbol's size in decimal below 100,000 bytes and in hexadecimal from there (a large
+    compiled step's); both are read, and only defined functions are kept."""
+    listing = """
+Symbol table '.symtab' contains 4 entries:
+   Num:    Value          Size Type    Bind   Vis      Ndx Name
+     1: 0000000000001000  2048 FUNC    GLOBAL DEFAULT    1 small_function
+     2: 0000000000002000 0x18fb4 FUNC    GLOBAL DEFAULT    1 large_function
+     3: 0000000000000000     0 FUNC    GLOBAL DEFAULT  UND NRT_MemInfo_alloc
+     4: 0000000000003000    16 OBJECT  GLOBAL DEFAULT    2 a_constant
+"""
+    monkeypatch.setattr(refcounts.subprocess, "run",
+                        lambda *args, **kwargs: subprocess.CompletedProcess(args, 0, stdout=listing, stderr=""))
+    assert refcounts.function_symbols(Path("any.o")) == {"small_function": (0x1000, 2048),
+                                                         "large_function": (0x2000, 0x18FB4)}
