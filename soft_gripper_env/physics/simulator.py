@@ -382,7 +382,7 @@ class Simulator:
         if self._has_object:
             water = np.zeros((n_steps + 1, B, 3)) if self._currents is None else self._currents.at_times(times)
             rods = self._plain_rods if work.tangent.size == 0 else \
-                self._plain_rods_with((work.tangent, work.director, work.reference_twist))
+                self._plain_rods[:N_DESIGN_FIELDS] + (work.tangent, work.director, work.reference_twist)
             body = None if self._body is None else self._body.plain_arrays
         while k < n_steps and interval.running.any():
             if not self._has_object:
@@ -560,13 +560,8 @@ class Simulator:
         ``frames`` to the coordinates ``q`` (R, N, 4)."""
         R, N = self.n_rods, self.disc.n_nodes
         transported = np.empty((R, N - 1, 3)), np.empty((R, N - 1, 3)), np.empty((R, N))
-        rod3d_update_frames(q, *frames, *transported, self._rods.frames)
+        rod3d_update_frames(q, *frames, *transported)
         return transported
-
-    def _plain_rods_with(self, frames: tuple) -> tuple:
-        """The plain rod arrays (:func:`~.solvers.newton.plain`) with the 3-D start-of-step ``frames`` (tangent,
-        director, reference twist)."""
-        return self._plain_rods[:N_DESIGN_FIELDS] + frames + self._plain_rods[N_DESIGN_FIELDS + len(frames):]
 
     def _frames(self, state: RodState):
         if self.disc.model != "3d":
@@ -655,7 +650,7 @@ class Simulator:
         q = np.empty((R, N, S))
         velocity, acceleration = np.empty(state.q.shape), np.empty(state.q.shape)
         frames_old = self._frames(state)
-        rods = self._plain_rods if frames_old is None else self._plain_rods_with(frames_old)
+        rods = self._plain_rods if frames_old is None else self._plain_rods[:N_DESIGN_FIELDS] + frames_old
         solver = self._per_step(dt)
         water = self._water(state.time)[1]
         held = body = result = None

@@ -15,14 +15,7 @@ from soft_gripper_env.physics import (
     evaluate_force,
     paper_finger,
 )
-from soft_gripper_env.physics.kernels.rod_3d import (
-    clear_frames,
-    new_frame_cache,
-    no_frame_cache,
-    rod3d_elastic,
-    rod3d_elastic_rod,
-    rod3d_update_frames,
-)
+from soft_gripper_env.physics.kernels.rod_3d import rod3d_elastic, rod3d_update_frames
 from soft_gripper_env.physics.kernels.rod_planar import planar_elastic
 
 
@@ -91,7 +84,7 @@ class Rod3D:
         self.tangent, self.director = t[None], a[None]
         ref_twist = np.empty((1, n_nodes))
         rod3d_update_frames(q, self.tangent, self.director, np.zeros((1, n_nodes)), np.empty_like(self.tangent),
-                            np.empty_like(self.director), ref_twist, no_frame_cache())
+                            np.empty_like(self.director), ref_twist)
         self.ref_twist = ref_twist
         self.kappa_bar = np.array([rng.uniform(-0.6, 0.6)])
         self.n_nodes = n_nodes
@@ -243,52 +236,3 @@ def test_banded_solver_matches_dense_solve(n, kd):
     x = rhs.copy()
     assert not solve_banded_symmetric_rod(singular, x, free)
     assert np.isnan(x).all()
-
-
-def test_frame_cache_gives_the_frames_again_only_at_the_same_coordinates():
-    """A rod's elastic assembly with a frame cache is the one without, to the bit; at the coordinates it last saw
-    it reads the frames from the cache (a cache altered behind its back shows), and at any other coordinates (a
-    zero's sign included), or once cleared, it computes them again. The step's end takes them from it as well."""
-    rng = np.random.default_rng(11)
-    rod = Rod3D(rng, n_nodes=8)
-    p, n = rod.p, rod.n_nodes
-
-    def assembled(q, cache):
-        force, band = np.zeros((n, 4)), np.zeros((4 * n, 11))
-        energy = rod3d_elastic_rod(q, rod.tangent[0], rod.director[0], rod.ref_twist[0], p["rest"], p["ea"], p["ei"],
-                                   p["gj"], p["voronoi"], rod.kappa_bar[0], force, band, True, cache, 0)
-        return energy, force, band
-
-    def same(a, b):
-        return all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
-
-    q = rod.q[0].copy()
-    cache = new_frame_cache(1, n)
-    reference = assembled(q, no_frame_cache())
-    assert same(assembled(q, cache), reference)
-    np.testing.assert_array_equal(cache.coordinates[0], q)
-    assert same(assembled(q, cache), reference)
-    cache.material1[0] += 0.1  # frames that do not belong to q: read only while q is what the cache last saw
-    assert not same(assembled(q, cache), reference)
-    moved = q.copy()
-    moved[3, 0] += 1e-3
-    assert same(assembled(moved, cache), assembled(moved, no_frame_cache()))
-    zero = moved.copy()
-    zero[2, 3] = 0.0
-    assembled(zero, cache)
-    cache.material1[0] += 0.1
-    negative_zero = zero.copy()
-    negative_zero[2, 3] = -0.0
-    assert same(assembled(negative_zero, cache), assembled(negative_zero, no_frame_cache()))
-    cache.material1[0] += 0.1
-    clear_frames(cache)
-    assert same(assembled(negative_zero, cache), assembled(negative_zero, no_frame_cache()))
-
-    def step_end(cache):
-        frames = np.empty_like(rod.tangent), np.empty_like(rod.director), np.empty_like(rod.ref_twist)
-        rod3d_update_frames(negative_zero[None], rod.tangent, rod.director, rod.ref_twist, *frames, cache)
-        return frames
-
-    assert same(step_end(cache), step_end(no_frame_cache()))
-    cache.tangent[0] += 0.1
-    np.testing.assert_array_equal(step_end(cache)[0], cache.tangent)

@@ -27,7 +27,7 @@ from ..scene.fluid import Fluid
 from ..scene.forces import ForceModel, ForceTerms
 from .finger_contact import FingerContact, any_near, finger_contact_rod
 from .forces import added_mass, linear_damping, morison_drag, rod_water_velocity
-from .rod_3d import FrameCache, no_frame_cache, rod3d_elastic_rod
+from .rod_3d import rod3d_elastic_rod
 from .rod_planar import planar_elastic_rod
 
 
@@ -54,29 +54,24 @@ class RodArrays(NamedTuple):
     """Start-of-step first director of every edge, (R, N − 1, 3); (0, 0, 3) in the planar model."""
     reference_twist: np.ndarray
     """Start-of-step reference twist at every node [rad], (R, N); (0, 0) in the planar model."""
-    frames: FrameCache
-    """3-D: the rods' frames within the step (:class:`~.rod_3d.FrameCache`), or an empty one, as in the planar
-    model: the frames are then computed at every assembly."""
 
     @classmethod
     def of(cls, disc: Discretization, fingers: FingerContact) -> RodArrays:
         """The arrays of ``disc`` with the contact between its fingers, without frames (a state's are put in with
-        ``_replace``) and with an empty frame cache."""
+        ``_replace``)."""
         return cls(disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness, disc.twist_stiffness,
-                   disc.voronoi_length, fingers, np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)),
-                   no_frame_cache())
+                   disc.voronoi_length, fingers, np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))
 
 
 N_DESIGN_FIELDS = 6
-"""The fields of :class:`RodArrays` that a design fixes, which come before a state's frames (and the cache)."""
+"""The fields of :class:`RodArrays` that a design fixes, which come before a state's frames."""
 
 
 @njit(cache=True, nogil=True)
 def named_rods(rods):
     """:class:`RodArrays` from its fields as plain tuples (:func:`~..solvers.newton.plain`), named again, the
     finger contact's too."""
-    return RodArrays(rods[0], rods[1], rods[2], rods[3], rods[4], FingerContact(*rods[5]), rods[6], rods[7], rods[8],
-                     FrameCache(*rods[9]))
+    return RodArrays(rods[0], rods[1], rods[2], rods[3], rods[4], FingerContact(*rods[5]), rods[6], rods[7], rods[8])
 
 
 class StepInputs(NamedTuple):
@@ -142,7 +137,7 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, velocity, accele
         energy = rod3d_elastic_rod(q[r], rods.tangent[r], rods.director[r], rods.reference_twist[r],
                                    rods.rest_length, rods.stretch_stiffness, rods.bend_stiffness,
                                    rods.twist_stiffness, rods.voronoi_length, step.natural_curvature[r], force,
-                                   band, hessian, rods.frames, r)
+                                   band, hessian)
     n_nodes, dim = velocity.shape
     dt = step.dt
     for i in range(n_nodes):

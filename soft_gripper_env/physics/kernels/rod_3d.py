@@ -29,7 +29,6 @@ the finite-difference tests check them.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -276,106 +275,28 @@ def _cross_matrix_entry(vectors, row, i, j):
     return -sign * vectors[row, k]
 
 
-class FrameCache(NamedTuple):
-    """Every rod's frames at the coordinates its elastic forces were last assembled at within one step, with the
-    assembly's scratch. The frames are a function of the coordinates and the start-of-step frames alone, so an
-    assembly at the same coordinates (Newton's matrices after a test that failed) and the step's end
-    (:func:`rod3d_update_frames`) take them from here instead of computing them again, to the bit; nor is the
-    scratch allocated at every assembly. Whoever changes the start-of-step frames clears it (:func:`clear_frames`).
-    Without one (:func:`no_frame_cache`, every array empty) the kernels compute the frames at every call."""
-
-    coordinates: np.ndarray
-    """The coordinates (R, N, 4) [m, rad] each rod's frames below belong to; NaN: none yet."""
-    tangent: np.ndarray
-    """Unit tangent of every edge, (R, N − 1, 3)."""
-    director: np.ndarray
-    """Reference director a1 of every edge, (R, N − 1, 3)."""
-    reference_twist: np.ndarray
-    """Reference twist at every node [rad], (R, N)."""
-    material1: np.ndarray
-    """Material director m1 of every edge, (R, N − 1, 3)."""
-    material2: np.ndarray
-    """Material director m2 of every edge, (R, N − 1, 3)."""
-    lengths: np.ndarray
-    """Length of every edge [m], (R, N − 1)."""
-    stencil: np.ndarray
-    """:func:`_bend_twist`'s Hessian, gradient and scratch, (6, 11, 11)."""
-    vectors: np.ndarray
-    """:func:`_bend_twist`'s 3-vectors, (:data:`N_STENCIL_VECTORS`, 3)."""
-    stretch_hessian: np.ndarray
-    """One edge's stretching Hessian, (7, 7); zero where an edge's blocks never write."""
-
-
-@njit(cache=True, nogil=True)
-def new_frame_cache(n_rods, n_nodes):
-    """A :class:`FrameCache` for ``n_rods`` rods of ``n_nodes`` nodes, holding no frames yet."""
-    n_edges = n_nodes - 1
-    coordinates = np.empty((n_rods, n_nodes, 4))
-    coordinates[:] = np.nan
-    return FrameCache(coordinates, np.empty((n_rods, n_edges, 3)), np.empty((n_rods, n_edges, 3)),
-                      np.empty((n_rods, n_nodes)), np.empty((n_rods, n_edges, 3)), np.empty((n_rods, n_edges, 3)),
-                      np.empty((n_rods, n_edges)), np.empty((6, 11, 11)), np.empty((N_STENCIL_VECTORS, 3)),
-                      np.zeros((7, 7)))
-
-
-def no_frame_cache() -> FrameCache:
-    """A :class:`FrameCache` of empty arrays: the kernels then compute every rod's frames at every call."""
-    return FrameCache(np.empty((0, 0, 4)), *(np.empty((0, 0, 3)),) * 2, np.empty((0, 0)), *(np.empty((0, 0, 3)),) * 2,
-                      np.empty((0, 0)), np.empty((0, 11, 11)), np.empty((0, 3)), np.empty((0, 7)))
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def clear_frames(cache):
-    """Forgets every rod's frames (their start-of-step frames are about to change)."""
-    cache.coordinates[:] = np.nan
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _same_bits(a, b):
-    """Whether the float arrays ``a`` and ``b`` (N, 4) hold the same values with the same signs of zero (NaN
-    never matches)."""
-    for i in range(a.shape[0]):
-        for k in range(a.shape[1]):
-            if a[i, k] != b[i, k] or (a[i, k] == 0.0 and math.copysign(1.0, a[i, k]) != math.copysign(1.0, b[i, k])):
-                return False
-    return True
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _cached_frames(r, qr, tangent_old, director_old, ref_twist_old, cache):
-    """Rod r's frames at ``qr`` (N, 4) in ``cache``, computed into it first unless they are there already."""
-    if not _same_bits(qr, cache.coordinates[r]):
-        rod_frames(qr, tangent_old, director_old, ref_twist_old, cache.tangent[r], cache.director[r],
-                   cache.reference_twist[r], cache.material1[r], cache.material2[r], cache.lengths[r])
-        cache.coordinates[r] = qr
-
-
 @njit(cache=True, nogil=True, error_model="numpy")
 def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
-                      twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian, cache, r):
+                      twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian):
     """Elastic energy of one rod [J]; adds −∇E to ``force`` (N, 4) and ∇²E to ``band`` (4N, 11).
 
     ``q`` (N, 4); the start-of-step frames: ``tangent_old`` and ``director_old`` (N − 1, 3), ``ref_twist_old`` (N);
-    ``natural_curvature`` κ̄ of the rod; ``cache`` a :class:`FrameCache`, in which this is rod ``r``, or an empty
-    one (:func:`no_frame_cache`).
+    ``natural_curvature`` κ̄ of the rod.
     """
     n_nodes = q.shape[0]
     n_edges = n_nodes - 1
     energy = 0.0
-    if cache.coordinates.shape[0] > 0:
-        _cached_frames(r, q, tangent_old, director_old, ref_twist_old, cache)
-        tangent, d1, ref_twist = cache.tangent[r], cache.director[r], cache.reference_twist[r]
-        m1, m2, lengths = cache.material1[r], cache.material2[r], cache.lengths[r]
-        stencil, vectors, stretch_hess = cache.stencil, cache.vectors, cache.stretch_hessian
-    else:
-        tangent, d1 = np.empty((n_edges, 3)), np.empty((n_edges, 3))
-        m1, m2 = np.empty((n_edges, 3)), np.empty((n_edges, 3))
-        ref_twist, lengths = np.empty(n_nodes), np.empty(n_edges)
-        stencil = np.empty((6, 11, 11))  # _bend_twist's Hessian, gradient and scratch
-        vectors = np.empty((N_STENCIL_VECTORS, 3))
-        stretch_hess = np.zeros((7, 7))
-        rod_frames(q, tangent_old, director_old, ref_twist_old, tangent, d1, ref_twist, m1, m2, lengths)
+    tangent = np.empty((n_edges, 3))
+    d1 = np.empty((n_edges, 3))
+    m1 = np.empty((n_edges, 3))
+    m2 = np.empty((n_edges, 3))
+    ref_twist = np.empty(n_nodes)
+    lengths = np.empty(n_edges)
+    stencil = np.empty((6, 11, 11))  # _bend_twist's Hessian, gradient and scratch
+    vectors = np.empty((N_STENCIL_VECTORS, 3))
     hess = stencil[0]
+    stretch_hess = np.zeros((7, 7))
+    rod_frames(q, tangent_old, director_old, ref_twist_old, tangent, d1, ref_twist, m1, m2, lengths)
     for e in range(n_edges):
         length = lengths[e]
         t = _row(tangent, e)
@@ -419,23 +340,20 @@ def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stre
     The start-of-step frames: ``tangent_old`` and ``director_old`` (R, N − 1, 3), ``ref_twist_old`` (R, N).
     """
     energy = np.zeros(q.shape[0])
-    cache = new_frame_cache(q.shape[0], q.shape[1])
     for r in range(q.shape[0]):
         energy[r] = rod3d_elastic_rod(q[r], tangent_old[r], director_old[r], ref_twist_old[r], rest_length,
                                       stretch_stiffness, bend_stiffness, twist_stiffness, voronoi_length,
-                                      natural_curvature[r], force[r], band[r], accumulate_hessian, cache, r)
+                                      natural_curvature[r], force[r], band[r], accumulate_hessian)
     return energy
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def rod3d_update_frames(q, tangent_old, director_old, ref_twist_old, tangent, director, ref_twist, cache):
-    """Frames at the end of a step: writes ``tangent``, ``director`` (R, N − 1, 3) and ``ref_twist`` (R, N), from
-    ``cache`` (:class:`FrameCache`) where it holds a rod's frames at ``q``; an empty cache holds none."""
+def rod3d_update_frames(q, tangent_old, director_old, ref_twist_old, tangent, director, ref_twist):
+    """Frames at the end of a step: writes ``tangent``, ``director`` (R, N − 1, 3) and ``ref_twist`` (R, N)."""
     n_rods, n_nodes = q.shape[0], q.shape[1]
-    if cache.coordinates.shape[0] == 0:
-        cache = new_frame_cache(n_rods, n_nodes)
+    m1 = np.empty((n_nodes - 1, 3))
+    m2 = np.empty((n_nodes - 1, 3))
+    lengths = np.empty(n_nodes - 1)
     for r in range(n_rods):
-        _cached_frames(r, q[r], tangent_old[r], director_old[r], ref_twist_old[r], cache)
-        tangent[r] = cache.tangent[r]
-        director[r] = cache.director[r]
-        ref_twist[r] = cache.reference_twist[r]
+        rod_frames(q[r], tangent_old[r], director_old[r], ref_twist_old[r], tangent[r], director[r], ref_twist[r],
+                   m1, m2, lengths)

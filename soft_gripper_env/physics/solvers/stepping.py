@@ -24,7 +24,7 @@ from numba import njit
 
 from ..kernels.contact import contact_reactions
 from ..kernels.forces import project_water
-from ..kernels.rod_3d import clear_frames, new_frame_cache, rod3d_update_frames
+from ..kernels.rod_3d import rod3d_update_frames
 from .corrector import solve_with_contact
 from .newton import finish, predict
 
@@ -171,17 +171,10 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
     ok = np.empty(n_grippers, dtype=np.bool_)
     most = np.zeros(n_grippers, dtype=np.int64)
     every = np.arange(n_grippers)
-    # 3-D: the frames of each rod's last assembly, for the next at the same coordinates and the step's end
-    frames = new_frame_cache(0 if planar else n_rods, n_nodes)
-    # as plain a tuple as the Python callers' empty cache, so that the solvers compile once for both
-    step_rods = (rods[0], rods[1], rods[2], rods[3], rods[4], rods[5], rods[6], rods[7], rods[8],
-                 (frames.coordinates, frames.tangent, frames.director, frames.reference_twist, frames.material1,
-                  frames.material2, frames.lengths, frames.stencil, frames.vectors, frames.stretch_hessian))
     interval.pending[:] = False
     for k in range(first, n_steps):
         if not interval.running.any():
             return k
-        clear_frames(frames)  # this step's start-of-step frames are the last step's end
         project_water(geometry[5], gripper_water[k], water)
         predict(state.q, state.velocity, state.acceleration, dt, q_pred, new.q)
         new.held[:, :] = state.held
@@ -204,10 +197,9 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
             old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
             motion = (new.body_position, new.body_angular_velocity, new.body_orientation, old, gripper_water[k],
                       water_acceleration)
-            solve_with_contact(new.q, step, step_rods, terms, solver, holds, hold_at, geometry, (body, motion),
-                               result)
+            solve_with_contact(new.q, step, rods, terms, solver, holds, hold_at, geometry, (body, motion), result)
         else:
-            solve_with_contact(new.q, step, step_rods, terms, solver, holds, hold_at, geometry, None, result)
+            solve_with_contact(new.q, step, rods, terms, solver, holds, hold_at, geometry, None, result)
         finish(new.q, state.q, state.velocity, dt, new.velocity, new.acceleration)
         if free_body:
             for b in range(n_grippers):
@@ -216,7 +208,7 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
                     new.body_angular_velocity[b, d] = new.body_angular_velocity[b, d] / dt
         if not planar:
             rod3d_update_frames(new.q, state.tangent, state.director, state.reference_twist, new.tangent,
-                                new.director, new.reference_twist, frames)
+                                new.director, new.reference_twist)
         any_pending = False
         for b in range(n_grippers):
             all_converged, resolved = True, True
