@@ -342,8 +342,8 @@ def _norms(vectors: np.ndarray) -> np.ndarray:
 
 def _finger_mean(values: np.ndarray) -> np.ndarray:
     """Mean over the fingers of (B, F) values: ``values.mean(axis=1)``'s arithmetic, to the bit (the sum, in float64
-    for bool, divided by F), without its Python-level wrapper."""
-    return np.add.reduce(values, axis=1, dtype=np.float64 if values.dtype == bool else None) / values.shape[1]
+    for bool and integers as ``mean`` takes it, divided by F), without its Python-level wrapper."""
+    return np.add.reduce(values, axis=1, dtype=np.float64 if values.dtype.kind in "biu" else None) / values.shape[1]
 
 
 def _check_interval(name, value, unit, low, high) -> None:

@@ -774,14 +774,16 @@ def test_finger_gap_follows_the_state_through_steps_and_resets():
 @given(seed=st.integers(0, 2**32 - 1), scale=st.floats(-8.0, 8.0), dtype=st.sampled_from([np.float64, np.float32]))
 def test_task_norms_and_finger_means_are_numpys_to_the_bit(seed, scale, dtype):
     """The task's per-step helpers repeat NumPy's arithmetic exactly: norms as ``np.linalg.norm(axis=-1)``, finger
-    means as ``mean(axis=1)`` (in float32 for float32 actions, in float64 for bool)."""
+    means as ``mean(axis=1)`` (in float32 for float32 actions, in float64 for bool and integers)."""
     from soft_gripper_env.grasp_task import _finger_mean, _norms
 
     rng = np.random.default_rng(seed)
     vectors = (rng.normal(size=(5, 3, 20, 3)) * 10.0**scale).astype(dtype)
     np.testing.assert_array_equal(_norms(vectors), np.linalg.norm(vectors, axis=-1))
     values = vectors[:, :, 0, 0]
-    for array in (values, values > 0):
+    # integers near 2**62: summed in int64 they would overflow, as ``mean`` never does
+    integers = (values / 10.0**scale * 2.0**60).astype(np.int64)
+    for array in (values, values > 0, integers):
         mean, expected = _finger_mean(array), array.mean(axis=1)
         assert mean.dtype == expected.dtype
         np.testing.assert_array_equal(mean, expected)
