@@ -21,17 +21,29 @@ Every figure is in env steps per second on one core (Numba and BLAS are held to 
 ``num_threads`` adds its own), with its ratio to ``Ant-v5``'s figure of the same run. The physics core's goals
 (:mod:`benchmarks.core_speed`: the paper's scene and batched planar µs per gripper-step) are timed in the same run,
 so that every goal of the throughput issue comes from one run. ``--quick`` times 16 and 64 envs only, once.
+
+The run also times a **ceiling**: the env's fingers alone, with nothing to grasp (the task's gripper, water, current,
+Δt and Newton settings, closing on a ramp at the task's fastest rate; no specimen, so no contact, no body, no
+corrector and no task), 64 grippers in one batch, in µs per gripper and physics step. An env step takes the task's
+substeps of that and more, for one env as for a vector of them, so ``substeps × µs`` is the least an env step can
+cost with these kernels at the task's Δt. The JSON's ``ceiling`` gives, per model, the steps per second and the ratio
+to Ant-v5 that no env configuration can pass, and for each goal the most substeps per action (the shortest
+``physics_dt``) at which the fingers alone would still reach it.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from benchmarks._timing import save_plot, time_ramp  # (sets one thread first)
 from soft_gripper_env.env import DEFAULT_MAX_EPISODE_STEPS
+from soft_gripper_env.grasp_task import GraspTask, task_episode
+from soft_gripper_env.physics import Scene
 
 ANT_STEPS = 3000
 VECTOR_SIZES = (1, 16, 64, 256)
@@ -43,6 +55,11 @@ TWO_THREAD_GOAL = 1.7
 """Two threads against one, make_vec(64), planar."""
 CORE_GOALS = {"paper_scene_planar_ms": 2.0, "paper_scene_3d_ms": 10.0, "batched_planar_us_per_gripper_step": 10.0}
 """The physics core's goals, absolute on the reference 2-core machine."""
+CEILING_BATCH = 64
+"""Grippers stepped together for the ceiling (the fingers alone): a batch shares each step's fixed costs, so their
+cost per gripper is the least."""
+CEILING_DURATION = 0.5
+"""Simulated time of one timed run of the fingers alone [s]."""
 
 
 def steps_per_second(env, steps: int, policy=None, seed: int = 0) -> float:
@@ -104,6 +121,45 @@ def time_grasping(model: str, num_envs: int, steps: int) -> float:
     return steps_per_second(env, steps, policy)
 
 
+def fingers_alone(model: str) -> tuple[Scene, int]:
+    """The env's fingers with nothing to grasp, and the task's physics substeps per action: the scene of the task's
+    first episode (seed 0: its water, current, Δt and Newton settings) without its specimen, closing on a ramp at the
+    task's fastest rate for :data:`CEILING_DURATION`."""
+    import numpy as np
+
+    task = GraspTask(model=model)
+    scene = task_episode(task, np.random.default_rng(0), {}).scene
+    return replace(scene, grasped_object=None, duration=CEILING_DURATION,
+                   natural_curvature_rate=-task.max_curvature_rate), task.substeps
+
+
+def time_fingers_alone(model: str, repeats: int) -> tuple[float, float]:
+    """µs per gripper and physics step of :func:`fingers_alone`, :data:`CEILING_BATCH` grippers in one batch, and
+    Newton's mean iterations per step there (about one: a solve and the test after it, the least a step can do)."""
+    scene, _ = fingers_alone(model)
+    seconds, trajectory = time_ramp(scene, CEILING_BATCH, repeats)
+    return 1e6 * seconds / (scene.n_steps * CEILING_BATCH), float(trajectory.newton_iterations.mean())
+
+
+def ceilings(ant_steps_per_s: float, fingers_alone_us: dict[str, float], substeps: dict[str, int]) -> dict:
+    """Per model: the least an env step can cost with these kernels, ``substeps`` × ``fingers_alone_us`` (µs per
+    gripper and physics step), as steps per second and as a ratio to Ant-v5; and for each goal of that model
+    (:data:`GOALS`) the most substeps per action at which the fingers alone would reach it (0: none)."""
+    out = {}
+    for model, us in fingers_alone_us.items():
+        if not (us > 0 and substeps[model] >= 1 and ant_steps_per_s > 0):
+            raise ValueError(f"ceilings: {model}: µs per gripper-step {us!r} and Ant-v5's steps/s "
+                             f"{ant_steps_per_s!r} must be positive, substeps {substeps[model]!r} at least 1")
+        steps_per_s = 1e6 / (substeps[model] * us)
+        # named without the goals' unit suffix: compare_commits reads a name ending in _per_s as a timed rate
+        goals = {key.removesuffix("_steps_per_s"): math.floor(1e6 / (goal * ant_steps_per_s * us) + 1e-9)
+                 for key, goal in GOALS.items() if ("_3d" in key) == (model == "3d")}
+        out[model] = {"fingers_alone_us_per_gripper_step": us, "substeps_per_action": substeps[model],
+                      "env_steps_per_s_at_most": steps_per_s, "vs_ant_v5": steps_per_s / ant_steps_per_s,
+                      "most_substeps_for_goal": goals}
+    return out
+
+
 def best(function, repeats: int, *args) -> float:
     """The largest of ``repeats`` results of ``function(*args)``, after one untimed call (compilation, caches)."""
     function(*args)
@@ -138,6 +194,8 @@ def measure(repeats: int, sizes: tuple[int, ...], steps: int) -> dict:
         results[f"vec64{suffix}_grasping_steps_per_s"] = best(time_grasping, 1, model, 64, steps)
     print("timing the physics core ...", flush=True)
     core = time_core(repeats)
+    print("timing the fingers alone (the ceiling) ...", flush=True)
+    alone = {model: time_fingers_alone(model, repeats) for model in MODELS}
     # the anchor again, at the end: a machine that slowed down during the run shows as two different figures
     results["ant_v5_steps_per_s"] = max(results["ant_v5_steps_per_s"], best(time_ant, repeats))
     ant = results["ant_v5_steps_per_s"]
@@ -152,7 +210,12 @@ def measure(repeats: int, sizes: tuple[int, ...], steps: int) -> dict:
                                                "met": threads["planar"] >= TWO_THREAD_GOAL}
     for key, goal in CORE_GOALS.items():
         goals[key] = {"goal": goal, "reached": core[key], "met": core[key] <= goal}
-    return {**results, "ratios_to_ant_v5": ratios, "two_threads_over_one": threads, "core": core, "goals": goals}
+    ceiling = ceilings(ant, {model: us for model, (us, _) in alone.items()},
+                       {model: fingers_alone(model)[1] for model in MODELS})
+    for model, (_, iterations) in alone.items():
+        ceiling[model]["newton_iterations_per_step"] = iterations
+    return {**results, "ratios_to_ant_v5": ratios, "two_threads_over_one": threads, "core": core, "goals": goals,
+            "ceiling": ceiling}
 
 
 def report(results: dict) -> None:
@@ -171,6 +234,12 @@ def report(results: dict) -> None:
         else:
             text = f"≤ {goal['goal']:g}, reached {goal['reached']:.2f}"
         print(f"  {key:<36}{text:<44}{'met' if goal['met'] else 'not met'}")
+    print("\nceiling: the fingers alone (no specimen, contact, body or task), batched, times the task's substeps:")
+    for model, each in results["ceiling"].items():
+        most = ", ".join(f"{key} {n}" for key, n in each["most_substeps_for_goal"].items())
+        print(f"  {model:<7}{each['fingers_alone_us_per_gripper_step']:7.1f} µs per gripper-step × "
+              f"{each['substeps_per_action']} substeps: at most {each['env_steps_per_s_at_most']:,.0f} steps/s = "
+              f"{each['vs_ant_v5']:.2f}× Ant-v5; most substeps per action that could reach each goal: {most}")
 
 
 def plot(results: dict, sizes: tuple[int, ...], path: Path) -> None:
@@ -188,6 +257,11 @@ def plot(results: dict, sizes: tuple[int, ...], path: Path) -> None:
         ax.scatter([64], [results[f"vec64{suffix}_two_threads_steps_per_s"] / ant], marker="^", s=70, color=color,
                    label=f"make_vec(64), {model}, two threads", zorder=3)
         ax.axhline(results[f"single{suffix}_steps_per_s"] / ant, color=color, ls=":", label=f"gym.make, {model}")
+        if "ceiling" in results:
+            ceiling = results["ceiling"]["3d" if suffix else "planar"]
+            ax.axhline(ceiling["vs_ant_v5"], color=color, ls="--", lw=2.0,
+                       label=f"ceiling, {model}, one thread: the fingers alone × "
+                             f"{ceiling['substeps_per_action']} substeps")
         if f"vec64{suffix}_grasping_steps_per_s" in results:
             ax.scatter([1, 64], [results[f"single{suffix}_grasping_steps_per_s"] / ant,
                                  results[f"vec64{suffix}_grasping_steps_per_s"] / ant], marker="x", s=70,

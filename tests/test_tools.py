@@ -1,6 +1,7 @@
 """The refactoring guard (scripts/golden_outputs.py), the commit comparison (benchmarks/compare_commits.py), the
 reference-count benchmark's reading of gdb (benchmarks/refcounts.py), the profile's attribution of samples
-(benchmarks/profile_env.py) and the grasp-outcome study's scoring (benchmarks/speed_vs_error.py)."""
+(benchmarks/profile_env.py), the grasp-outcome study's scoring (benchmarks/speed_vs_error.py) and env_speed's
+ceiling (benchmarks/env_speed.py)."""
 
 import os
 import subprocess
@@ -12,6 +13,7 @@ import pytest
 
 from benchmarks import refcounts
 from benchmarks.compare_commits import higher_is_faster, measurements, paired_case, plot_ratios, run_benchmark
+from benchmarks.env_speed import ceilings
 from benchmarks.profile_env import RUNTIME_BLOCK, attribute, profile
 from benchmarks.refcounts import by_function, debug_cache, demangle, hits
 from benchmarks.speed_vs_error import (
@@ -381,3 +383,21 @@ Symbol table '.symtab' contains 4 entries:
                         lambda *args, **kwargs: subprocess.CompletedProcess(args, 0, stdout=listing, stderr=""))
     assert refcounts.function_symbols(Path("any.o")) == {"small_function": (0x1000, 2048),
                                                          "large_function": (0x2000, 0x18FB4)}
+
+
+def test_env_speed_ceiling_is_substeps_times_the_fingers_alone_and_gives_each_goal_its_most_substeps():
+    """Ant-v5 at 1,000 steps/s; the fingers alone at 50 µs per gripper-step planar (10 substeps) and 100 µs in 3-D
+    (20): an env step costs at least 500 and 2,000 µs, at most 2,000 and 500 steps/s (2× and 0.5× Ant-v5). A goal of
+    g× Ant-v5 leaves 1e6 / (g · 1000) µs per action: 10 planar substeps for one env (2×), 2 for make_vec(64) (10×),
+    20 and 5 in 3-D (0.5×, 2×)."""
+    result = ceilings(1000.0, {"planar": 50.0, "3d": 100.0}, {"planar": 10, "3d": 20})
+    planar, spatial = result["planar"], result["3d"]
+    assert planar["env_steps_per_s_at_most"] == pytest.approx(2000.0) and planar["vs_ant_v5"] == pytest.approx(2.0)
+    assert spatial["env_steps_per_s_at_most"] == pytest.approx(500.0) and spatial["vs_ant_v5"] == pytest.approx(0.5)
+    assert planar["most_substeps_for_goal"] == {"single": 10, "vec64": 2}
+    assert spatial["most_substeps_for_goal"] == {"single_3d": 20, "vec64_3d": 5}
+    # the derived figures are not read as timings by compare_commits; the one measurement is
+    assert set(measurements({"ceiling": result})) == {"ceiling[planar][fingers_alone_us_per_gripper_step]",
+                                                      "ceiling[3d][fingers_alone_us_per_gripper_step]"}
+    with pytest.raises(ValueError, match="planar: µs per gripper-step 0.0"):
+        ceilings(1000.0, {"planar": 0.0}, {"planar": 10})

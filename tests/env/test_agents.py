@@ -328,6 +328,10 @@ def test_env_speed_benchmark_writes_json_and_plot(tmp_path):
         assert ratio == pytest.approx(results[key] / ant)
     assert {"paper_scene_planar_ms", "paper_scene_3d_ms", "batched_planar_us_per_gripper_step"} <= set(
         results["goals"])
+    for model in ("planar", "3d"):  # the fingers alone take about one Newton solve per step: the least there is
+        ceiling = results["ceiling"][model]
+        assert ceiling["fingers_alone_us_per_gripper_step"] > 0 and 0.5 < ceiling["newton_iterations_per_step"] < 2
+        assert ceiling["vs_ant_v5"] == pytest.approx(ceiling["env_steps_per_s_at_most"] / ant)
     assert (tmp_path / "speed.png").stat().st_size > 5000
 
 
