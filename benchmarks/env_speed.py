@@ -23,12 +23,14 @@ Every figure is in env steps per second on one core (Numba and BLAS are held to 
 so that every goal of the throughput issue comes from one run. ``--quick`` times 16 and 64 envs only, once.
 
 The run also times a **ceiling**: the env's fingers alone, with nothing to grasp (the task's gripper, water, current,
-Δt and Newton settings, closing on a ramp at the task's fastest rate; no specimen, so no contact, no body, no
-corrector and no task), 64 grippers in one batch, in µs per gripper and physics step. An env step takes the task's
-substeps of that and more, for one env as for a vector of them, so ``substeps × µs`` is the least an env step can
-cost with these kernels at the task's Δt. The JSON's ``ceiling`` gives, per model, the steps per second and the ratio
-to Ant-v5 that no env configuration can pass, and for each goal the most substeps per action (the shortest
-``physics_dt``) at which the fingers alone would still reach it.
+Δt and Newton settings, κ̄ held at zero so that they hang still in the current and Newton takes about one solve and
+its test per step, the least a step can take; no specimen, so no contact, no body, no corrector and no task), 64
+grippers in one batch, in µs per gripper and physics step. An env step takes the task's substeps of that and more,
+for one env as for a vector of them, so ``substeps × µs`` is about the least an env step can cost with these
+kernels at the task's Δt (a bound within the timing's noise: it is timed minutes apart from the env). The JSON's
+``ceiling`` gives, per model, the steps per second and the ratio to Ant-v5 that no env configuration on one thread
+can pass, and for each goal the most substeps per action (the shortest ``physics_dt``) at which the fingers alone
+would still reach it.
 """
 
 from __future__ import annotations
@@ -123,14 +125,13 @@ def time_grasping(model: str, num_envs: int, steps: int) -> float:
 
 def fingers_alone(model: str) -> tuple[Scene, int]:
     """The env's fingers with nothing to grasp, and the task's physics substeps per action: the scene of the task's
-    first episode (seed 0: its water, current, Δt and Newton settings) without its specimen, closing on a ramp at the
-    task's fastest rate for :data:`CEILING_DURATION`."""
+    first episode (seed 0: its water, current, Δt and Newton settings) without its specimen, κ̄ held at zero for
+    :data:`CEILING_DURATION`."""
     import numpy as np
 
     task = GraspTask(model=model)
     scene = task_episode(task, np.random.default_rng(0), {}).scene
-    return replace(scene, grasped_object=None, duration=CEILING_DURATION,
-                   natural_curvature_rate=-task.max_curvature_rate), task.substeps
+    return replace(scene, grasped_object=None, duration=CEILING_DURATION, natural_curvature_rate=0.0), task.substeps
 
 
 def time_fingers_alone(model: str, repeats: int) -> tuple[float, float]:
@@ -180,6 +181,7 @@ def time_core(repeats: int) -> dict:
 def measure(repeats: int, sizes: tuple[int, ...], steps: int) -> dict:
     """Every figure of the run, anchor first and last (its best counts), with the ratios and goals."""
     results = {"ant_v5_steps_per_s": best(time_ant, repeats)}
+    alone = {}
     for model in MODELS:
         suffix = "" if model == "planar" else "_3d"
         print(f"timing {model}: one env ...", flush=True)
@@ -187,6 +189,8 @@ def measure(repeats: int, sizes: tuple[int, ...], steps: int) -> dict:
         for n in sizes:
             print(f"timing {model}: make_vec({n}) ...", flush=True)
             results[f"vec{n}{suffix}_steps_per_s"] = best(time_vector, repeats, model, n, steps)
+        print(f"timing {model}: the fingers alone (the ceiling) ...", flush=True)
+        alone[model] = time_fingers_alone(model, repeats)  # next to the vectors, which it bounds
         print(f"timing {model}: make_vec(64) on two threads ...", flush=True)
         results[f"vec64{suffix}_two_threads_steps_per_s"] = best(time_vector, repeats, model, 64, steps, 2)
         print(f"timing {model}: grasping, one env and make_vec(64) ...", flush=True)
@@ -194,8 +198,6 @@ def measure(repeats: int, sizes: tuple[int, ...], steps: int) -> dict:
         results[f"vec64{suffix}_grasping_steps_per_s"] = best(time_grasping, 1, model, 64, steps)
     print("timing the physics core ...", flush=True)
     core = time_core(repeats)
-    print("timing the fingers alone (the ceiling) ...", flush=True)
-    alone = {model: time_fingers_alone(model, repeats) for model in MODELS}
     # the anchor again, at the end: a machine that slowed down during the run shows as two different figures
     results["ant_v5_steps_per_s"] = max(results["ant_v5_steps_per_s"], best(time_ant, repeats))
     ant = results["ant_v5_steps_per_s"]
