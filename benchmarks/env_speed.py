@@ -134,12 +134,13 @@ def fingers_alone(model: str) -> tuple[Scene, int]:
     return replace(scene, grasped_object=None, duration=CEILING_DURATION, natural_curvature_rate=0.0), task.substeps
 
 
-def time_fingers_alone(model: str, repeats: int) -> tuple[float, float]:
-    """µs per gripper and physics step of :func:`fingers_alone`, :data:`CEILING_BATCH` grippers in one batch, and
-    Newton's mean iterations per step there (about one: a solve and the test after it, the least a step can do)."""
-    scene, _ = fingers_alone(model)
+def time_fingers_alone(model: str, repeats: int) -> tuple[float, float, int]:
+    """µs per gripper and physics step of :func:`fingers_alone`, :data:`CEILING_BATCH` grippers in one batch,
+    Newton's mean iterations per step there (about one: a solve and the test after it, the least a step can do), and
+    the task's substeps per action."""
+    scene, substeps = fingers_alone(model)
     seconds, trajectory = time_ramp(scene, CEILING_BATCH, repeats)
-    return 1e6 * seconds / (scene.n_steps * CEILING_BATCH), float(trajectory.newton_iterations.mean())
+    return 1e6 * seconds / (scene.n_steps * CEILING_BATCH), float(trajectory.newton_iterations.mean()), substeps
 
 
 def ceilings(ant_steps_per_s: float, fingers_alone_us: dict[str, float], substeps: dict[str, int]) -> dict:
@@ -212,9 +213,9 @@ def measure(repeats: int, sizes: tuple[int, ...], steps: int) -> dict:
                                                "met": threads["planar"] >= TWO_THREAD_GOAL}
     for key, goal in CORE_GOALS.items():
         goals[key] = {"goal": goal, "reached": core[key], "met": core[key] <= goal}
-    ceiling = ceilings(ant, {model: us for model, (us, _) in alone.items()},
-                       {model: fingers_alone(model)[1] for model in MODELS})
-    for model, (_, iterations) in alone.items():
+    ceiling = ceilings(ant, {model: us for model, (us, _, _) in alone.items()},
+                       {model: substeps for model, (_, _, substeps) in alone.items()})
+    for model, (_, iterations, _) in alone.items():
         ceiling[model]["newton_iterations_per_step"] = iterations
     return {**results, "ratios_to_ant_v5": ratios, "two_threads_over_one": threads, "core": core, "goals": goals,
             "ceiling": ceiling}
