@@ -30,6 +30,7 @@ from .scene.forces import BodyLoads, ForceTerms
 from .scene.objects import ContactSettings
 from .scene.scene import NATURAL_CURVATURE_LIMIT, Scene
 from .solvers.corrector import ContactGeometry, contact_masks, solve_with_contact
+from .solvers.gpu import GpuRods, GpuUnsupported, RodsKernelShape, check_device
 from .solvers.integrators import INTEGRATORS
 from .solvers.newton import (
     Holds,
@@ -152,7 +153,10 @@ class Simulator:
     >>> result = sim.step(state, natural_curvature=-0.15 * state.time)
     """
 
-    def __init__(self, scene: Scene | Sequence[Scene], batch_size: int | None = None) -> None:
+    def __init__(self, scene: Scene | Sequence[Scene], batch_size: int | None = None, device: str = "cpu") -> None:
+        self.device = check_device(device)
+        """Where :meth:`advance` steps the batch: "cpu", or "cuda" (:mod:`.solvers.gpu`: rods on their own today;
+        every other call runs on the CPU)."""
         scenes = [scene] if isinstance(scene, Scene) else list(scene)
         if not scenes or not all(isinstance(s, Scene) for s in scenes):
             raise ValueError("Simulator.scene must be a Scene or a non-empty sequence of Scenes")
@@ -225,6 +229,15 @@ class Simulator:
                 raise ValueError(f"Simulator.scene[{index}] differs from scene[0] in more than the grasped object's "
                                  f"size, place, density and velocity and the water's current")
             self._load(index, each)
+        self._gpu: GpuRods | None = None
+        if device == "cuda":
+            if self._has_object:
+                raise GpuUnsupported("Simulator(device='cuda'): scenes with a grasped object (the contact corrector "
+                                     "and the free body) do not run on the GPU yet; rods on their own do")
+            if scene.integrator != "backward_euler":
+                raise GpuUnsupported(f"Simulator(device='cuda'): the integrator {scene.integrator!r} does not run "
+                                     f"on the GPU yet; backward_euler does")
+            self._gpu = GpuRods(*self.gpu_constants())
 
     def set_scene(self, index: int, scene: Scene, start_time: float = 0.0) -> None:
         """Gives gripper ``index`` another scene, which may differ from the batch's only in the grasped object's
@@ -379,6 +392,8 @@ class Simulator:
         for _ in range(n_steps):
             times.append(times[-1] + dt)  # the clock of successive steps, to the bit
         k = 0
+        if self._gpu is not None:
+            return self._advance_on_gpu(state, work, interval, times, n_steps)
         if self._has_object:
             water = np.zeros((n_steps + 1, B, 3)) if self._currents is None else self._currents.at_times(times)
             rods = self._plain_rods if work.tangent.size == 0 else \
@@ -399,6 +414,32 @@ class Simulator:
                                    f"pending")
         N = self.disc.n_nodes
         return record(Advance, state=self._state_of(work, times[k]),
+                      natural_curvature=interval.natural_curvature.reshape(B, F), clock=interval.clock,
+                      failed=interval.failed, newton_iterations=interval.newton_iterations,
+                      normal_impulse=interval.normal_impulse.reshape(B, F, N),
+                      impulse=interval.impulse.reshape(B, F, N, 3))
+
+    def gpu_constants(self) -> tuple:
+        """The first arguments of :class:`~.solvers.gpu.GpuRods` for this batch: its constants and kernel shape."""
+        disc = self.disc
+        shape = RodsKernelShape(self.n_fingers, disc.n_nodes, disc.stride, disc.dim,
+                                self._finger_contact.stiffness > 0.0)
+        return (self._plain_rods, self._plain_terms, self._per_step(self.scene.time_step), disc.finger_directions,
+                shape)
+
+    def _advance_on_gpu(self, state: RodState, work: WorkingState, interval: Interval, times: list[float],
+                        n_steps: int) -> Advance:
+        """:meth:`advance`'s steps on the GPU (:class:`~.solvers.gpu.GpuRods`), from and into ``work`` and
+        ``interval``: rods on their own, a failed step not halved (the gripper stops there)."""
+        B, F, N = self.batch_size, self.n_fingers, self.disc.n_nodes
+        water = np.zeros((n_steps + 1, B, 3)) if self._currents is None else self._currents.at_times(times)
+        clock_before = interval.clock.copy()
+        self._gpu.advance((work.q, work.velocity, work.acceleration, work.tangent, work.director,
+                           work.reference_twist), water, interval.natural_curvature, interval.curvature_rate,
+                          (interval.curvature_low, interval.curvature_high), interval.running, interval.failed,
+                          interval.clock, interval.newton_iterations, self.scene.time_step, n_steps)
+        taken = int(np.rint((interval.clock - clock_before) / self.scene.time_step).max())
+        return record(Advance, state=self._state_of(work, times[taken]),
                       natural_curvature=interval.natural_curvature.reshape(B, F), clock=interval.clock,
                       failed=interval.failed, newton_iterations=interval.newton_iterations,
                       normal_impulse=interval.normal_impulse.reshape(B, F, N),

@@ -10,7 +10,12 @@ import pytest
 
 from soft_gripper_env.physics import PENETRATION_TOLERANCE, Simulator, Sphere
 from soft_gripper_env.physics.kernels.contact import STICK_SPEED, distance_to_segment
-from soft_gripper_env.physics.kernels.finger_contact import FingerContact, find_near_fingers, finger_contact_rod
+from soft_gripper_env.physics.kernels.finger_contact import (
+    FingerContact,
+    find_near_fingers,
+    finger_contact_rod,
+    finger_scratch,
+)
 from soft_gripper_env.physics.scene.design import ELASTOSIL_MA_4601, FingerDesign, GripperDesign, paper_finger
 from soft_gripper_env.physics.scene.forces import Gravity, fluid_forces
 from soft_gripper_env.physics.scene.objects import ContactSettings
@@ -18,6 +23,11 @@ from soft_gripper_env.physics.scene.scene import Scene
 
 FULL_ACTUATION = -0.2
 """The env's largest natural curvature, at which fingers closed on nothing meet past the gripper's axis."""
+
+
+def _scratch(contact: FingerContact):
+    """The contact kernels' work arrays for ``contact``'s fingers."""
+    return finger_scratch(contact.eligible.shape[0], contact.eligible.shape[1])
 
 
 def _surface_gap(positions: np.ndarray, radius: np.ndarray) -> float:
@@ -105,7 +115,7 @@ def test_straight_fingers_at_their_shared_root_do_not_touch():
     find_near_fingers(q, q, contact, near)
     force = np.zeros((disc.n_nodes, disc.stride))
     band = np.zeros((disc.n_dofs, disc.band_width + 1))
-    finger_contact_rod(0, q, q, q, 0.01, contact, near, True, force, band)
+    finger_contact_rod(0, q, q, q, 0.01, contact, near, True, force, band, _scratch(contact))
     assert not force.any()
 
 
@@ -126,7 +136,7 @@ def test_penalty_and_friction_against_closed_forms(slip_speed):
     assert near[0, node, 1] >= 0
     force = np.zeros((disc.n_nodes, disc.stride))
     band = np.zeros((disc.n_dofs, disc.band_width + 1))
-    finger_contact_rod(0, q, q_old, q_old, dt, contact, near, True, force, band)
+    finger_contact_rod(0, q, q_old, q_old, dt, contact, near, True, force, band, _scratch(contact))
     normal = stiffness * overlap
     expected_friction = -friction * normal * slip_speed / math.hypot(slip_speed, STICK_SPEED)
     assert force[node, 2] == pytest.approx(normal, rel=1e-9)
@@ -152,7 +162,7 @@ def test_mirror_share_of_the_overlap():
     find_near_fingers(q_old, q_old, contact, near)
     force = np.zeros((disc.n_nodes, disc.stride))
     band = np.zeros((disc.n_dofs, disc.band_width + 1))
-    finger_contact_rod(0, q, q_old, q_old, dt, contact, near, False, force, band)
+    finger_contact_rod(0, q, q_old, q_old, dt, contact, near, False, force, band, _scratch(contact))
     assert force[node, 2] == pytest.approx(stiffness * (start_overlap + 2.0 * closing), rel=1e-9)
 
 
@@ -172,7 +182,8 @@ def test_resting_fingers_push_each_other_equally(closed):
         near = np.empty((3, disc.n_nodes, 3), dtype=np.int64)
         find_near_fingers(q, q, pair, near)
         force = np.zeros((disc.n_nodes, disc.stride))
-        finger_contact_rod(a, q, q, q, 0.01, pair, near, False, force, np.zeros((disc.n_dofs, disc.band_width + 1)))
+        finger_contact_rod(a, q, q, q, 0.01, pair, near, False, force, np.zeros((disc.n_dofs, disc.band_width + 1)),
+                           _scratch(pair))
         return force[:, :3].sum(axis=0)
 
     on_0, on_1 = force_on(0, 1), force_on(1, 0)
@@ -224,7 +235,7 @@ def test_newton_blocks_are_the_penalty_hessian_on_oblique_normals(model):
     find_near_fingers(q_old, q_old, contact, near)
     force = np.zeros((disc.n_nodes, disc.stride))
     band = np.zeros((disc.n_dofs, disc.band_width + 1))
-    finger_contact_rod(0, q_old, q_old, q_old, dt, contact, near, True, force, band)
+    finger_contact_rod(0, q_old, q_old, q_old, dt, contact, near, True, force, band, _scratch(contact))
     kd, dim = disc.band_width, disc.dim
     for node, (a, b) in directions.items():
         normal = a * along + b * up

@@ -102,6 +102,44 @@ class FingerContact(NamedTuple):
         return cls(stiffness, float(friction), disc.node_radius.copy(), eligible, np.ascontiguousarray(axes))
 
 
+class FingerScratch(NamedTuple):
+    """Work arrays of the contact between a gripper's F fingers of N nodes (:func:`finger_scratch`): passed in, so
+    that the search and the forces allocate nothing (a GPU thread has no heap to allocate from)."""
+
+    points: np.ndarray
+    """(:data:`N_SCRATCH_POINTS`, 3): 3-vectors, one a row."""
+    other: np.ndarray
+    """Another finger's world nodes at the start of the step, (N, 3)."""
+    matrix: np.ndarray
+    """(3, 3)."""
+    old: np.ndarray
+    """Every finger's world nodes at the start of the step, (F, N, 3)."""
+    motion: np.ndarray
+    """Each node's predicted displacement over the step [m], (F, N)."""
+    centres: np.ndarray
+    """The centre of each finger's runs of :data:`CHUNK_EDGES` edges, (F, runs, 3)."""
+    bounds: np.ndarray
+    """Their radii, (F, runs)."""
+    chunk_motion: np.ndarray
+    """The most a node of each run moves, (F, runs)."""
+
+
+N_SCRATCH_POINTS = 10
+"""Rows of :attr:`FingerScratch.points`."""
+
+
+@njit(cache=True, nogil=True)
+def finger_scratch(n_fingers, n_nodes):
+    """:class:`FingerScratch` for ``n_fingers`` fingers of ``n_nodes`` nodes (0 fingers: empty arrays, for a gripper
+    without finger contact)."""
+    n_chunks = (n_nodes - 2) // CHUNK_EDGES + 1 if n_fingers else 0
+    return FingerScratch(np.empty((N_SCRATCH_POINTS if n_fingers else 0, 3)),
+                         np.empty((n_nodes if n_fingers else 0, 3)), np.empty((3 if n_fingers else 0, 3)),
+                         np.empty((n_fingers, n_nodes, 3)),
+                         np.empty((n_fingers, n_nodes)), np.empty((n_fingers, n_chunks, 3)),
+                         np.empty((n_fingers, n_chunks)), np.empty((n_fingers, n_chunks)))
+
+
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _world(q_node, axes, out):
     """A node's world position (3,) [m] from its coordinates ``q_node`` (≥ D,) on a finger with ``axes`` (D, 3)."""
@@ -128,7 +166,8 @@ def _nearest_on_finger(point, finger, eligible, first_edge, last_edge, nearest, 
                 length2 += (finger[j + 1, k] - finger[j, k]) ** 2
                 along += (candidate[k] - finger[j, k]) * (finger[j + 1, k] - finger[j, k])
             best, best_edge, best_t = distance, j, along / length2 if length2 > 0.0 else 0.0
-            nearest[:] = candidate
+            for k in range(3):  # element by element: the GPU build copies no array into another
+                nearest[k] = candidate[k]
     return best, best_edge, best_t
 
 
@@ -153,26 +192,28 @@ def find_near_fingers(q_old, q_pred, contact, near):
     if contact.stiffness == 0.0:
         return
     n_fingers = contact.eligible.shape[0]
+    scratch = finger_scratch(n_fingers, contact.eligible.shape[1])
     for first_rod in range(0, q_old.shape[0], n_fingers):
-        near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near)
+        near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near, scratch)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near):
+def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near, scratch):
     """For the gripper whose rods start at ``first_rod``: the nearest eligible edge of each other finger o to each
     node i of each rod r at the start of the step, into ``near[r, i, o]`` where the node is within the reach plus
     :data:`NEAR_MARGIN` plus twice the node's and the other finger's nearby nodes' predicted motion, else
     −1. Arrays (R, N, S); ``contact`` is
-    :class:`FingerContact`; ``near`` (R, N, F) int (empty, and left alone, without finger contact)."""
+    :class:`FingerContact`; ``near`` (R, N, F) int (empty, and left alone, without finger contact); ``scratch``
+    :class:`FingerScratch`."""
     stiffness, radius, eligible, axes = contact.stiffness, contact.radius, contact.eligible, contact.axes
     if stiffness == 0.0:
         return
     n_fingers, n_nodes = eligible.shape[0], eligible.shape[1]
     for f in range(n_fingers):
         near[first_rod + f, :, :] = -1
-    old = np.empty((n_fingers, n_nodes, 3))
-    motion = np.empty((n_fingers, n_nodes))  # each node's predicted displacement over the step [m]
-    point = np.empty(3)
+    old, motion, centres, bounds, chunk_motion = scratch.old, scratch.motion, scratch.centres, scratch.bounds, \
+        scratch.chunk_motion
+    point, nearest, candidate = scratch.points[0], scratch.points[1], scratch.points[2]
     for f in range(n_fingers):
         _finger_world(q_old[first_rod + f], axes[f], old[f])
         for i in range(n_nodes):
@@ -182,9 +223,7 @@ def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near):
     # each finger's edges in runs of CHUNK_EDGES, each within a sphere (centre, radius with the finger's): a node
     # far from a run's sphere skips its edges, which makes the search cheap while the fingers are apart
     n_chunks = (n_nodes - 2) // CHUNK_EDGES + 1
-    centres = np.empty((n_fingers, n_chunks, 3))
-    bounds = np.empty((n_fingers, n_chunks))
-    chunk_motion = np.zeros((n_fingers, n_chunks))  # the most a node of the run moves
+    chunk_motion[:, :] = 0.0
     for o in range(n_fingers):
         for c in range(n_chunks):
             first_node, last_node = c * CHUNK_EDGES, min((c + 1) * CHUNK_EDGES, n_nodes - 1)
@@ -197,7 +236,6 @@ def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near):
                 bound = max(bound, apart + radius[j])
                 chunk_motion[o, c] = max(chunk_motion[o, c], motion[o, j])
             bounds[o, c] = bound
-    nearest, candidate = np.empty(3), np.empty(3)
     for f in range(n_fingers):
         for i in range(n_nodes):
             node = old[f, i]  # views taken out of the loops below: each costs reference counts
@@ -236,11 +274,11 @@ def any_near(near, r):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, band):
+def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, band, scratch):
     """Adds the other fingers' contact force on rod r's nodes [N] to ``force`` (N, S), in the rod's coordinates, and
     its Newton matrix to ``band`` (n, kd+1) (when ``hessian``), for the step of ``dt`` [s] from ``q_old`` with
     predictor ``q_pred`` (arrays (R, N, S); the other fingers stay where they were at the start of the step, see
-    the module notes). ``near`` (R, N, F) from :func:`find_near_fingers`."""
+    the module notes). ``near`` (R, N, F) from :func:`find_near_fingers`; ``scratch`` :class:`FingerScratch`."""
     if contact.stiffness == 0.0:
         return
     stiffness, mu, radius, eligible, axes = contact.stiffness, contact.friction, contact.radius, contact.eligible, \
@@ -254,11 +292,10 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
     stride = q.shape[2]
     kd = band.shape[1] - 1
     own_axes = axes[f]
-    x, x_old, nearest, nearest_old, candidate = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    normal, slip, world_force = np.empty(3), np.empty(3), np.empty(3)
-    other_old = np.empty((n_nodes, 3))
-    end_a, end_b = np.empty(3), np.empty(3)
-    matrix = np.empty((3, 3))
+    points = scratch.points
+    x, x_old, nearest, nearest_old, candidate = points[0], points[1], points[2], points[3], points[4]
+    normal, slip, world_force, end_a, end_b = points[5], points[6], points[7], points[8], points[9]
+    other_old, matrix = scratch.other, scratch.matrix
     for o in range(n_fingers):
         if o == f:
             continue
@@ -334,5 +371,6 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
                     band[row, kd - a + b] += value
 
 
-__all__ = ["any_near", "SEARCH_WINDOW", "CHUNK_EDGES", "NEAR_MARGIN", "FingerContact", "find_near_fingers",
+__all__ = ["any_near", "SEARCH_WINDOW", "CHUNK_EDGES", "NEAR_MARGIN", "FingerContact", "FingerScratch",
+           "N_SCRATCH_POINTS", "finger_scratch", "find_near_fingers",
            "near_fingers_of_gripper", "finger_contact_rod"]

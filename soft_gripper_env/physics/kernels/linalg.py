@@ -1,12 +1,14 @@
 """The one linear solve of the simulator: many small symmetric banded systems, one per rod.
 
-This is the only place that depends on how the solve is done, so a GPU back end replaces this module alone.
+The GPU back end (:mod:`..solvers.gpu`) compiles these same functions for the device.
 Band storage is row-major: ``band[r, i, kd − (i − j)]`` holds A[i, j] of rod r for i − kd ≤ j ≤ i, so row i of the
 lower triangle, diagonal last (``band[r, i, kd]``), is one contiguous run and the factorisation's inner loops are
 contiguous dot products.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -101,7 +103,7 @@ def factor_banded_symmetric(a, free, row_scratch):
             d -= s * lik
             a[i, kd - i + k] = lik
             k += 1
-        if d == 0.0 or not np.isfinite(d):
+        if d == 0.0 or not math.isfinite(d):  # math's: the GPU build has no NumPy ufuncs
             return False
         a[i, kd] = d
     return True

@@ -29,6 +29,7 @@ the finite-difference tests check them.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -275,27 +276,55 @@ def _cross_matrix_entry(vectors, row, i, j):
     return -sign * vectors[row, k]
 
 
+class ElasticScratch(NamedTuple):
+    """Work arrays of :func:`rod3d_elastic_rod` for rods of N nodes (:func:`elastic_scratch`): passed in, so that the
+    assembly allocates nothing (a GPU thread has no heap to allocate from, and on the CPU each allocation cost more
+    than binding the array)."""
+
+    tangent: np.ndarray
+    """(N − 1, 3)."""
+    director: np.ndarray
+    """(N − 1, 3)."""
+    m1: np.ndarray
+    """(N − 1, 3)."""
+    m2: np.ndarray
+    """(N − 1, 3)."""
+    reference_twist: np.ndarray
+    """(N,)."""
+    lengths: np.ndarray
+    """(N − 1,)."""
+    stencil: np.ndarray
+    """(6, 11, 11): :func:`_bend_twist`'s Hessian, gradient and scratch."""
+    vectors: np.ndarray
+    """(:data:`N_STENCIL_VECTORS`, 3)."""
+    stretch_hessian: np.ndarray
+    """(7, 7)."""
+
+
+@njit(cache=True, nogil=True)
+def elastic_scratch(n_nodes):
+    """:class:`ElasticScratch` for rods of ``n_nodes`` nodes (0: empty arrays, for the planar model)."""
+    n_edges = max(n_nodes - 1, 0)
+    return ElasticScratch(np.empty((n_edges, 3)), np.empty((n_edges, 3)), np.empty((n_edges, 3)),
+                          np.empty((n_edges, 3)), np.empty(n_nodes), np.empty(n_edges),
+                          np.empty((6 if n_nodes else 0, 11, 11)), np.empty((N_STENCIL_VECTORS if n_nodes else 0, 3)),
+                          np.empty((7 if n_nodes else 0, 7)))
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
-                      twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian):
+                      twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian, scratch):
     """Elastic energy of one rod [J]; adds −∇E to ``force`` (N, 4) and ∇²E to ``band`` (4N, 11).
 
     ``q`` (N, 4); the start-of-step frames: ``tangent_old`` and ``director_old`` (N − 1, 3), ``ref_twist_old`` (N);
-    ``natural_curvature`` κ̄ of the rod.
+    ``natural_curvature`` κ̄ of the rod; ``scratch`` :class:`ElasticScratch`.
     """
     n_nodes = q.shape[0]
     n_edges = n_nodes - 1
     energy = 0.0
-    tangent = np.empty((n_edges, 3))
-    d1 = np.empty((n_edges, 3))
-    m1 = np.empty((n_edges, 3))
-    m2 = np.empty((n_edges, 3))
-    ref_twist = np.empty(n_nodes)
-    lengths = np.empty(n_edges)
-    stencil = np.empty((6, 11, 11))  # _bend_twist's Hessian, gradient and scratch
-    vectors = np.empty((N_STENCIL_VECTORS, 3))
+    tangent, d1, m1, m2, ref_twist, lengths, stencil, vectors, stretch_hess = scratch
     hess = stencil[0]
-    stretch_hess = np.zeros((7, 7))
+    stretch_hess[:, :] = 0.0  # the twist's rows and columns stay zero
     rod_frames(q, tangent_old, director_old, ref_twist_old, tangent, d1, ref_twist, m1, m2, lengths)
     for e in range(n_edges):
         length = lengths[e]
@@ -340,10 +369,11 @@ def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stre
     The start-of-step frames: ``tangent_old`` and ``director_old`` (R, N − 1, 3), ``ref_twist_old`` (R, N).
     """
     energy = np.zeros(q.shape[0])
+    scratch = elastic_scratch(q.shape[1])
     for r in range(q.shape[0]):
         energy[r] = rod3d_elastic_rod(q[r], tangent_old[r], director_old[r], ref_twist_old[r], rest_length,
                                       stretch_stiffness, bend_stiffness, twist_stiffness, voronoi_length,
-                                      natural_curvature[r], force[r], band[r], accumulate_hessian)
+                                      natural_curvature[r], force[r], band[r], accumulate_hessian, scratch)
     return energy
 
 

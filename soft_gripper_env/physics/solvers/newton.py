@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..kernels.assembly import StepInputs, assemble_rod, named_rods
+from ..kernels.assembly import StepInputs, assemble_rod, named_rods, rod_scratch
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
 from ..kernels.contact import along_surface, onto_surface, rotate_node, tangent_basis
 from ..kernels.finger_contact import any_near, near_fingers_of_gripper
@@ -261,8 +261,8 @@ class _NewtonWork(NamedTuple):
     """Scratch of one gripper's solve, allocated once per call of :func:`newton`."""
 
     force: np.ndarray
-    velocity: np.ndarray
-    acceleration: np.ndarray
+    rod: tuple
+    """:class:`~..kernels.assembly.RodScratch`."""
     bands: np.ndarray
     coupling: np.ndarray
     x0: np.ndarray
@@ -299,8 +299,8 @@ def _new_work(q, dim, n_fingers, coupled, contact, fingers):
     matrix, tensor = vector.reshape((0, 0)), vector.reshape((0, 0, 6))  # views: no allocation of their own
     # per-rod flags and ratios as rows of two arrays: rod_ratio, last_ratio; active, touching, factored, rubbing
     ratios, flags = np.empty((2, n_fingers)), np.zeros((4, n_fingers), dtype=np.bool_)
-    motion = np.empty((2, n_nodes, dim))  # velocity and acceleration
-    rods = (np.empty((n_nodes, stride)), motion[0], motion[1], np.empty((n_fingers, n, band_width + 1)))
+    rods = (np.empty((n_nodes, stride)), rod_scratch(n_nodes, dim, stride, n_fingers, fingers),
+            np.empty((n_fingers, n, band_width + 1)))
     surface = (np.zeros((n_fingers, n_nodes, dim)), np.empty((dim, dim))) if contact else (tensor, matrix)
     surface = surface + (flags[3], ratios[1])
     if coupled:
@@ -322,7 +322,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
     active, touching, rod_ratio, factored = work.active, work.touching, work.rod_ratio, work.factored
     converged, iterations_of, ratio = result.converged, result.iterations, result.ratio
     residual, mass_term, bands, x0 = result.residual, solver.mass_term, work.bands, work.x0
-    scratch = (work.force, work.velocity, work.acceleration)
+    scratch = (work.force, work.rod)
     rubbing, last_ratio = work.rubbing, work.last_ratio
     measured = free if holds is None else holds.measured
     n_fingers = solver.n_fingers
@@ -639,12 +639,12 @@ def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_si
     """Assembles rod r and writes its residual (n,) into ``residual`` and its negation, the Newton step's right-hand
     side, into ``right_hand_side`` (n,), its Newton matrix into ``band`` (n, kd+1) (the elastic part when ``matrix``:
     the forces do not depend on it); ``scratch`` holds the work arrays
-    force (N, S), velocity and acceleration (N, D). Returns the rod's largest scaled residual and ``largest``
+    force (N, S) and :class:`~..kernels.assembly.RodScratch`. Returns the rod's largest scaled residual and ``largest``
     updated with it (NaN is caught: it never compares as small)."""
     # the caller passes rows and work arrays it took out of their bundles once per solve: this runs once per rod and
     # Newton iteration, and each bundle member or array view read here would cost an atomic reference count
-    force, velocity, acceleration = scratch
-    assemble_rod(r, q, step, rods, terms, matrix, force, band, velocity, acceleration)
+    force, rod_work = scratch
+    assemble_rod(r, q, step, rods, terms, matrix, force, band, rod_work)
     own = 0.0
     mass_term, tolerance_inverse, q_pred = solver.mass_term, solver.tolerance_inverse, step.q_pred
     n_nodes, stride = force.shape
@@ -814,17 +814,29 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
     every_rod[:] = True
     work = _new_work(q, dim, solver.n_fingers, False, False, step.near.size > 0)
     for b in range(n_rods // solver.n_fingers):  # gripper by gripper, while its rods' arrays are in cache
-        rods_of_b = range(b * solver.n_fingers, (b + 1) * solver.n_fingers)
-        for r in rods_of_b:
-            _predict_rod(r, q_old, velocity_old, acceleration_old, dt, step.q_pred, q)
-        if step.near.size > 0:
-            near_fingers_of_gripper(b * solver.n_fingers, q_old, step.q_pred, rods.fingers, step.near)
-        _solve_gripper(b, q, step, rods, terms, solver, solver.clamp_free, None, None, every_rod, result, work)
-        for r in rods_of_b:
-            _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
-            if midpoint:
-                _midpoint_end_rod(r, q_old, velocity_old, q, velocity)
+        step_gripper_rods(b, velocity_old, acceleration_old, step, rods, terms, solver, midpoint, q, velocity,
+                          acceleration, every_rod, result, work)
     return per_gripper(result.converged, result.iterations, result.ratio, solver.n_fingers)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def step_gripper_rods(b, velocity_old, acceleration_old, step, rods, terms, solver, midpoint, q, velocity,
+                      acceleration, every_rod, result, work):
+    """Gripper b's rods, on their own, through one backward-Euler step from ``step.q_old`` (:func:`advance_rods`,
+    whose arguments these are, named): :func:`predict` into ``step.q_pred`` and ``q``, the fingers near each other,
+    Newton's method (:func:`newton`'s loop, results into ``result``) and :func:`finish` (with ``midpoint``,
+    :func:`midpoint_end` too). Allocates nothing (``work`` from :func:`_new_work`, or a GPU thread's own arrays)."""
+    n_fingers = solver.n_fingers
+    q_old, dt = step.q_old, step.dt
+    for r in range(b * n_fingers, (b + 1) * n_fingers):
+        _predict_rod(r, q_old, velocity_old, acceleration_old, dt, step.q_pred, q)
+    if step.near.size > 0:
+        near_fingers_of_gripper(b * n_fingers, q_old, step.q_pred, rods.fingers, step.near, work.rod.fingers)
+    _solve_gripper(b, q, step, rods, terms, solver, solver.clamp_free, None, None, every_rod, result, work)
+    for r in range(b * n_fingers, (b + 1) * n_fingers):
+        _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
+        if midpoint:
+            _midpoint_end_rod(r, q_old, velocity_old, q, velocity)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -892,4 +904,5 @@ def per_gripper(converged, iterations, ratio, n_fingers):
 
 
 __all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "BodyCoupling", "MAX_STEP_HALVINGS",
-           "eliminate_rods", "newton", "advance_rods", "predict", "finish", "midpoint_end", "per_gripper"]
+           "eliminate_rods", "newton", "advance_rods", "step_gripper_rods", "predict", "finish", "midpoint_end",
+           "per_gripper"]

@@ -1,0 +1,251 @@
+"""The GPU back end against the CPU path, measured side by side in one run: speed and agreement.
+
+    python -m benchmarks.gpu_speed --json out/gpu_speed.json [--plot out/gpu_speed.png] [--sizes 1024,4096,...]
+    python -m benchmarks.gpu_speed --plot-only out/gpu_speed.json --plot docs/img/gpu_speed.png
+
+What it measures today is what the GPU back end runs today (:mod:`soft_gripper_env.physics.solvers.gpu`): the
+env's **fingers alone**, with nothing to grasp. Each gripper has the scene of one of the task's episodes (its
+gripper, water, current, Δt and Newton settings) without its specimen, and every control interval (``control_dt``,
+the task's substeps) takes a random natural-curvature rate per finger within the task's range, κ̄ kept within
+[−0.2, 0.2]: the physics of random actions, without the task.
+
+- **agreement**: 8 grippers for ``--agreement-seconds`` (1 s) of such intervals on the CPU and on the GPU, from the
+  same start with the same rates: the largest distance between any node's world positions at any interval's end
+  [m], and the Newton iterations of each;
+- **GPU speed**: ``Simulator(..., device="cuda").advance`` over one control interval, for each of ``--sizes``
+  grippers: env steps per second (grippers × intervals / seconds) and µs per gripper-step, end to end (the state
+  copied to the device and back at every call, the current evaluated on the host), and the kernel alone on
+  device-resident arrays (CUDA's own clock); the first call's time less a later one's is the kernel's compile time;
+- **the CPU anchor, in the same run**: the same intervals on the CPU path for 64 grippers in one batch on one
+  thread (the ``make_vec(64)`` layout), and the ratio of each GPU figure to it.
+
+Without a GPU (or numba-cuda) it says so and times nothing on the GPU.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import time  # noqa: E402
+from dataclasses import replace  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from soft_gripper_env.grasp_task import GraspTask, task_episode  # noqa: E402
+from soft_gripper_env.physics import Simulator  # noqa: E402
+
+SIZES = (1024, 4096, 16384, 65536)
+"""Grippers per batch on the GPU."""
+CPU_BATCH = 64
+"""Grippers in the CPU anchor's batch (the make_vec(64) layout, one thread)."""
+CURVATURE_RANGE = (-0.2, 0.2)
+"""κ̄ kept within this range (dimensionless): the env's actuation."""
+AGREEMENT_GRIPPERS = 8
+
+
+def fingers_alone(model: str, n_grippers: int) -> tuple[list, GraspTask]:
+    """The scenes of the task's first ``n_grippers`` episodes (seeds 0, 1, …) without their specimens, and the
+    task."""
+    task = GraspTask(model=model)
+    scenes = [replace(task_episode(task, np.random.default_rng(seed), {}).scene, grasped_object=None)
+              for seed in range(n_grippers)]
+    return scenes, task
+
+
+def random_rates(task: GraspTask, n_grippers: int, n_intervals: int, seed: int = 0) -> np.ndarray:
+    """A random κ̄ rate per interval, gripper and finger [1/s], (K, B, F), uniform within the task's range."""
+    rng = np.random.default_rng(seed)
+    return task.max_curvature_rate * rng.uniform(-1.0, 1.0, (n_intervals, n_grippers, task.gripper.n_fingers))
+
+
+def run_intervals(sim: Simulator, rates: np.ndarray, substeps: int, record: bool = False):
+    """``len(rates)`` control intervals of ``substeps`` steps from the initial state; returns the final advance,
+    the wall time [s] of each interval, and (with ``record``) the world positions after each, (K, B, F, N, 3)."""
+    state = sim.initial_state()
+    curvature = np.zeros(rates.shape[1:])
+    seconds, positions, advanced = [], [], None
+    for rate in rates:
+        start = time.perf_counter()
+        advanced = sim.advance(state, curvature, rate, substeps, CURVATURE_RANGE)
+        seconds.append(time.perf_counter() - start)
+        state, curvature = advanced.state, advanced.natural_curvature
+        if record:
+            positions.append(sim.world_positions(state))
+    return advanced, np.array(seconds), (np.stack(positions) if record else None)
+
+
+def agreement(model: str, seconds: float) -> dict:
+    """CPU and GPU from the same start with the same rates for ``seconds`` of intervals."""
+    scenes, task = fingers_alone(model, AGREEMENT_GRIPPERS)
+    n_intervals = int(round(seconds / task.control_dt))
+    rates = random_rates(task, AGREEMENT_GRIPPERS, n_intervals, seed=1)
+    runs = {}
+    for device in ("cpu", "cuda"):
+        advanced, _, positions = run_intervals(Simulator(scenes, device=device), rates, task.substeps, record=True)
+        runs[device] = (advanced, positions)
+    (cpu, cpu_positions), (gpu, gpu_positions) = runs["cpu"], runs["cuda"]
+    return {"grippers": AGREEMENT_GRIPPERS, "simulated_s": n_intervals * task.control_dt,
+            "max_position_difference_m": float(np.abs(cpu_positions - gpu_positions).max()),
+            "newton_iterations_cpu": cpu.newton_iterations.tolist(),
+            "newton_iterations_gpu": gpu.newton_iterations.tolist(),
+            "failed_cpu": int(cpu.failed.sum()), "failed_gpu": int(gpu.failed.sum())}
+
+
+def cpu_anchor(model: str, n_intervals: int) -> dict:
+    """The CPU path's figures for :data:`CPU_BATCH` grippers, one thread (after a warm-up interval)."""
+    scenes, task = fingers_alone(model, CPU_BATCH)
+    sim = Simulator(scenes)
+    run_intervals(sim, random_rates(task, CPU_BATCH, 1), task.substeps)
+    _, seconds, _ = run_intervals(sim, random_rates(task, CPU_BATCH, n_intervals), task.substeps)
+    total = float(seconds.sum())
+    return {"grippers": CPU_BATCH, "intervals": n_intervals, "substeps": task.substeps,
+            "env_steps_per_s": CPU_BATCH * n_intervals / total,
+            "us_per_gripper_step": 1e6 * total / (CPU_BATCH * n_intervals * task.substeps)}
+
+
+def gpu_speed(model: str, size: int, n_intervals: int) -> dict:
+    """The GPU's figures for ``size`` grippers: end to end through ``Simulator.advance``, and the kernel alone."""
+    from soft_gripper_env.physics.solvers.gpu import THREADS_PER_BLOCK, cuda_module, rods_kernel
+
+    cuda = cuda_module()
+    scenes, task = fingers_alone(model, min(size, 256))
+    scenes = (scenes * (size // len(scenes) + 1))[:size]
+    start = time.perf_counter()
+    sim = Simulator(scenes, device="cuda")
+    setup = time.perf_counter() - start
+    _, first, _ = run_intervals(sim, random_rates(task, size, 1), task.substeps)
+    advanced, seconds, _ = run_intervals(sim, random_rates(task, size, n_intervals), task.substeps)
+    total = float(seconds.sum())
+    result = {"grippers": size, "intervals": n_intervals, "substeps": task.substeps, "setup_s": setup,
+              "first_call_s": float(first[0]), "compile_s": float(first[0] - seconds.min()),
+              "env_steps_per_s": size * n_intervals / total,
+              "us_per_gripper_step": 1e6 * total / (size * n_intervals * task.substeps),
+              "newton_iterations_per_step": float(advanced.newton_iterations.mean() / task.substeps),
+              "failed": int(advanced.failed.sum())}
+    # the kernel alone: the same interval on arrays that stay on the device (CUDA events time it)
+    work = sim._working_state(advanced.state, copy=True)
+    B, R = sim.batch_size, sim.n_rods
+    water = np.zeros((task.substeps + 1, B, 3)) if sim._currents is None else \
+        sim._currents.at_times(advanced.state.time + task.physics_dt * np.arange(task.substeps + 1))
+    arguments, _, _ = sim._gpu.arguments(
+        (work.q, work.velocity, work.acceleration, work.tangent, work.director, work.reference_twist), water,
+        advanced.natural_curvature.reshape(R).copy(), np.zeros(R), CURVATURE_RANGE, np.ones(B, dtype=bool),
+        np.zeros(B, dtype=bool), np.zeros(B), np.zeros(B, dtype=np.int64), task.physics_dt, task.substeps)
+    kernel = rods_kernel(sim._gpu.shape)
+    blocks = (B + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
+    start_event, end_event = cuda.event(), cuda.event()
+    best = float("inf")
+    for _ in range(3):
+        start_event.record()
+        kernel[blocks, THREADS_PER_BLOCK](*arguments)
+        end_event.record()
+        end_event.synchronize()
+        best = min(best, start_event.elapsed_time(end_event) / 1e3)  # [ms] to [s]
+    result["kernel_s_per_interval"] = best
+    result["kernel_env_steps_per_s"] = size / best
+    result["kernel_us_per_gripper_step"] = 1e6 * best / (size * task.substeps)
+    return result
+
+
+def plot(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.8))
+    for model, color in (("planar", "tab:blue"), ("3d", "tab:red")):
+        each = results.get("models", {}).get(model)
+        if not each or not each.get("gpu"):
+            continue
+        sizes = [g["grippers"] for g in each["gpu"]]
+        ax.plot(sizes, [g["env_steps_per_s"] for g in each["gpu"]], "o-", color=color,
+                label=f"{model}: GPU, Simulator.advance (with copies)")
+        ax.plot(sizes, [g["kernel_env_steps_per_s"] for g in each["gpu"]], "s--", color=color,
+                label=f"{model}: GPU kernel alone")
+        if "cpu" in each:
+            ax.axhline(each["cpu"]["env_steps_per_s"], color=color, ls=":",
+                       label=f"{model}: CPU, {each['cpu']['grippers']} grippers, one thread")
+    ax.set_xscale("log", base=2)
+    ax.set_yscale("log")
+    ax.set_xlabel("grippers stepped together")
+    ax.set_ylabel("env steps per second (fingers alone, one control interval each)")
+    ax.set_title(results.get("device", "GPU") + ": the fingers alone, GPU against the CPU in one run", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--json", type=Path, help="write the results to this JSON file (after every stage)")
+    parser.add_argument("--plot", type=Path, default=Path("out") / "gpu_speed.png", help="plot path (PNG)")
+    parser.add_argument("--plot-only", type=Path, help="draw the plot from this JSON file and stop")
+    parser.add_argument("--sizes", default=",".join(str(s) for s in SIZES), help="grippers per GPU batch")
+    parser.add_argument("--models", default="planar,3d", help="rod models, comma-separated")
+    parser.add_argument("--intervals", type=int, default=5, help="timed control intervals per size (default 5)")
+    parser.add_argument("--agreement-seconds", type=float, default=1.0, help="simulated time of the agreement run")
+    args = parser.parse_args(argv)
+    if args.plot_only:
+        plot(json.loads(args.plot_only.read_text()), args.plot)
+        return 0
+    if args.intervals < 1:
+        parser.error(f"--intervals = {args.intervals} must be at least 1")
+    sizes = [int(s) for s in args.sizes.split(",")]
+    models = args.models.split(",")
+    for model in models:
+        if model not in ("planar", "3d"):
+            parser.error(f"--models: {model!r} is not one of planar, 3d")
+    from soft_gripper_env.physics.solvers.gpu import GpuUnavailable, cuda_module
+
+    results: dict = {"models": {}}
+    try:
+        name = getattr(cuda_module().get_current_device(), "name", "Numba's CUDA simulator")
+        results["device"] = name.decode() if isinstance(name, bytes) else str(name)
+    except GpuUnavailable as error:
+        print(f"no GPU: {error}")
+        results["device"] = None
+        results["error"] = str(error)
+
+    def save() -> None:
+        if args.json:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(results, indent=1))
+
+    for model in models:
+        each = results["models"][model] = {}
+        print(f"{model}: the CPU anchor ...", flush=True)
+        each["cpu"] = cpu_anchor(model, args.intervals)
+        print(f"  {each['cpu']}", flush=True)
+        save()
+        if results["device"] is None:
+            continue
+        print(f"{model}: agreement over {args.agreement_seconds} s ...", flush=True)
+        each["agreement"] = agreement(model, args.agreement_seconds)
+        print(f"  {each['agreement']}", flush=True)
+        save()
+        each["gpu"] = []
+        for size in sizes:
+            print(f"{model}: GPU, {size} grippers ...", flush=True)
+            figures = gpu_speed(model, size, args.intervals)
+            figures["vs_cpu"] = figures["env_steps_per_s"] / each["cpu"]["env_steps_per_s"]
+            figures["kernel_vs_cpu"] = figures["kernel_env_steps_per_s"] / each["cpu"]["env_steps_per_s"]
+            each["gpu"].append(figures)
+            print(f"  {figures}", flush=True)
+            save()
+    if results["device"] is not None:
+        plot(results, args.plot)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
