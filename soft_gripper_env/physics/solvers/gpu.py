@@ -35,6 +35,7 @@ import os
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 from numba.core import types
 
 from ..kernels.assembly import N_DESIGN_FIELDS, RodScratch, StepInputs, named_rods
@@ -42,7 +43,7 @@ from ..kernels.finger_contact import CHUNK_EDGES, N_SCRATCH_POINTS, FingerScratc
 from ..kernels.forces import project_water
 from ..kernels.rod_3d import N_STENCIL_VECTORS, ElasticScratch, rod_frames
 from ..scene.forces import ForceTerms
-from .newton import SolverArrays, SolveResult, _NewtonWork, step_gripper_rods
+from .newton import NewtonWork, SolverArrays, SolveResult, step_gripper_rods
 
 THREADS_PER_BLOCK = 64
 """CUDA threads (grippers) per block: each thread holds tens of kilobytes of local arrays, so small blocks keep
@@ -141,6 +142,27 @@ def rods_kernel(shape: RodsKernelShape):
     return kernel
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def copy_rod(source, source_rod, target, target_rod, frames):
+    """Copies rod ``source_rod`` of the state ``source`` into rod ``target_rod`` of ``target``, element by element
+    (the GPU build copies no array into another by slice). A state is a tuple (q, velocity, acceleration (R, N, S),
+    tangent, director (R, N − 1, 3), reference twist (R, N)); its frames are copied with ``frames``."""
+    q, velocity, acceleration, tangent, director, twist = source
+    q_to, velocity_to, acceleration_to, tangent_to, director_to, twist_to = target
+    for i in range(q.shape[1]):
+        for s in range(q.shape[2]):
+            q_to[target_rod, i, s] = q[source_rod, i, s]
+            velocity_to[target_rod, i, s] = velocity[source_rod, i, s]
+            acceleration_to[target_rod, i, s] = acceleration[source_rod, i, s]
+    if frames:
+        for e in range(tangent.shape[1]):
+            for k in range(3):
+                tangent_to[target_rod, e, k] = tangent[source_rod, e, k]
+                director_to[target_rod, e, k] = director[source_rod, e, k]
+        for i in range(twist.shape[1]):
+            twist_to[target_rod, i] = twist[source_rod, i]
+
+
 def _build_rods_kernel(shape: RodsKernelShape):
     F, N, S, D = shape.n_fingers, shape.n_nodes, shape.stride, shape.dim
     n = N * S
@@ -157,7 +179,6 @@ def _build_rods_kernel(shape: RodsKernelShape):
     @cuda.jit
     def advance_rods_interval(state, rods_design, terms_fields, solver_fields, interval):
         b = cuda.grid(1)
-        q_all, velocity_all, acceleration_all, tangent_all, director_all, twist_all = state
         gripper_water, directions, curvature, rate, curvature_range, running, failed, clock, iterations_sum, \
             timing = interval
         if b >= running.shape[0] or not running[b]:
@@ -182,21 +203,11 @@ def _build_rods_kernel(shape: RodsKernelShape):
         kappa = cuda.local.array(F, float64)
         water = cuda.local.array((F, D), float64)
         near = cuda.local.array((F, N, F), int64)[:contact_fingers]
+        start = (q_old, velocity_old, acceleration_old) + frames_old  # a step's start; its end:
+        end = (q, velocity, acceleration) + frames
         for f in range(F):
-            r = first + f
-            kappa[f] = curvature[r]
-            for i in range(N):
-                for s in range(S):
-                    q_old[f, i, s] = q_all[r, i, s]
-                    velocity_old[f, i, s] = velocity_all[r, i, s]
-                    acceleration_old[f, i, s] = acceleration_all[r, i, s]
-            if three_d:
-                for e in range(edges):
-                    for k in range(3):
-                        frames_old[0][f, e, k] = tangent_all[r, e, k]
-                        frames_old[1][f, e, k] = director_all[r, e, k]
-                for i in range(N):
-                    frames_old[2][f, i] = twist_all[r, i]
+            kappa[f] = curvature[first + f]
+            copy_rod(state, first + f, start, f, three_d)
         # Newton's results and work arrays (newton._new_work's, sized for one gripper)
         flags = cuda.local.array((5, F), boolean)  # converged, changed, every rod, active, rubbing
         counts = cuda.local.array((2, F), int64)
@@ -232,7 +243,7 @@ def _build_rods_kernel(shape: RodsKernelShape):
         vector = cuda.local.array(1, float64)[:0]
         matrix = cuda.local.array((1, 1), float64)[:0]
         tensor = cuda.local.array((1, 1, 6), float64)[:0]
-        work = _NewtonWork(cuda.local.array((N, S), float64), scratch, cuda.local.array((F, n, band), float64),
+        work = NewtonWork(cuda.local.array((N, S), float64), scratch, cuda.local.array((F, n, band), float64),
                            tensor, cuda.local.array((F, n), float64), tensor, tensor, matrix,
                            cuda.local.array((F, n), float64)[:contact_fingers], ratios[1], flags[3],
                            cuda.local.array(F, boolean), cuda.local.array(F, boolean), vector, matrix, vector, vector,
@@ -265,36 +276,13 @@ def _build_rods_kernel(shape: RodsKernelShape):
                 failed[b] = True
                 break
             for f in range(F):  # the step taken: its end is the next one's start (stepping.commit_step's order)
-                for i in range(N):
-                    for s in range(S):
-                        q_old[f, i, s] = q[f, i, s]
-                        velocity_old[f, i, s] = velocity[f, i, s]
-                        acceleration_old[f, i, s] = acceleration[f, i, s]
-                if three_d:
-                    for e in range(edges):
-                        for c in range(3):
-                            frames_old[0][f, e, c] = frames[0][f, e, c]
-                            frames_old[1][f, e, c] = frames[1][f, e, c]
-                    for i in range(N):
-                        frames_old[2][f, i] = frames[2][f, i]
+                copy_rod(end, f, start, f, three_d)
                 kappa[f] = min(max(kappa[f] + rate[first + f] * dt, low), high)
             iterations_sum[b] += most
             clock[b] += dt
         for f in range(F):
-            r = first + f
-            curvature[r] = kappa[f]
-            for i in range(N):
-                for s in range(S):
-                    q_all[r, i, s] = q_old[f, i, s]
-                    velocity_all[r, i, s] = velocity_old[f, i, s]
-                    acceleration_all[r, i, s] = acceleration_old[f, i, s]
-            if three_d:
-                for e in range(edges):
-                    for c in range(3):
-                        tangent_all[r, e, c] = frames_old[0][f, e, c]
-                        director_all[r, e, c] = frames_old[1][f, e, c]
-                for i in range(N):
-                    twist_all[r, i] = frames_old[2][f, i]
+            curvature[first + f] = kappa[f]
+            copy_rod(start, f, state, first + f, three_d)
 
     return advance_rods_interval
 

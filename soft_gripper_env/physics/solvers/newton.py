@@ -257,8 +257,9 @@ def newton(q, step, rods, terms, solver, free, holds, coupling, solve, result):
         _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve, result, work)
 
 
-class _NewtonWork(NamedTuple):
-    """Scratch of one gripper's solve, allocated once per call of :func:`newton`."""
+class NewtonWork(NamedTuple):
+    """Scratch of one gripper's solve: allocated once per call of :func:`newton` or :func:`advance_rods` on the CPU
+    (:func:`_new_work`), the thread's own arrays on the GPU (:mod:`.gpu`)."""
 
     force: np.ndarray
     rod: tuple
@@ -304,13 +305,13 @@ def _new_work(q, dim, n_fingers, coupled, contact, fingers):
     surface = (np.zeros((n_fingers, n_nodes, dim)), np.empty((dim, dim))) if contact else (tensor, matrix)
     surface = surface + (flags[3], ratios[1])
     if coupled:
-        return _NewtonWork(*rods, np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)), np.empty((n_fingers, n, 6)),
+        return NewtonWork(*rods, np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)), np.empty((n_fingers, n, 6)),
                            np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)), np.zeros((n_fingers, n)),
                            ratios[0], flags[0], flags[1], flags[2], np.empty(6), np.empty((6, 6)), np.empty(6),
                            np.empty(6), np.empty((3, 3)), np.empty((n, 6)), np.empty(band_width + 1),
                            *surface)
     rod_delta = np.zeros((n_fingers, n)) if fingers else matrix
-    return _NewtonWork(*rods, tensor, np.empty((n_fingers, n)), tensor, tensor, matrix, rod_delta, ratios[0], flags[0],
+    return NewtonWork(*rods, tensor, np.empty((n_fingers, n)), tensor, tensor, matrix, rod_delta, ratios[0], flags[0],
                        flags[1], flags[2], vector, matrix, vector, vector, matrix, matrix,
                        np.empty(band_width + 1), *surface)
 
@@ -904,5 +905,5 @@ def per_gripper(converged, iterations, ratio, n_fingers):
 
 
 __all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "BodyCoupling", "MAX_STEP_HALVINGS",
-           "eliminate_rods", "newton", "advance_rods", "step_gripper_rods", "predict", "finish", "midpoint_end",
-           "per_gripper"]
+           "NewtonWork", "eliminate_rods", "newton", "advance_rods", "step_gripper_rods", "predict", "finish",
+           "midpoint_end", "per_gripper"]
