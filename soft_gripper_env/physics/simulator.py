@@ -393,7 +393,7 @@ class Simulator:
             times.append(times[-1] + dt)  # the clock of successive steps, to the bit
         k = 0
         if self._gpu is not None:
-            return self._advance_on_gpu(state, work, interval, times, n_steps)
+            return self._advance_on_gpu(work, interval, times, n_steps)
         if self._has_object:
             water = np.zeros((n_steps + 1, B, 3)) if self._currents is None else self._currents.at_times(times)
             rods = self._plain_rods if work.tangent.size == 0 else \
@@ -427,8 +427,7 @@ class Simulator:
         return (self._plain_rods, self._plain_terms, self._per_step(self.scene.time_step), disc.finger_directions,
                 shape)
 
-    def _advance_on_gpu(self, state: RodState, work: WorkingState, interval: Interval, times: list[float],
-                        n_steps: int) -> Advance:
+    def _advance_on_gpu(self, work: WorkingState, interval: Interval, times: list[float], n_steps: int) -> Advance:
         """:meth:`advance`'s steps on the GPU (:class:`~.solvers.gpu.GpuRods`), from and into ``work`` and
         ``interval``: rods on their own, a failed step not halved (the gripper stops there)."""
         B, F, N = self.batch_size, self.n_fingers, self.disc.n_nodes

@@ -25,9 +25,9 @@ from numba import njit
 from ..scene.discretization import Discretization
 from ..scene.fluid import Fluid
 from ..scene.forces import ForceModel, ForceTerms
-from .finger_contact import FingerContact, FingerScratch, any_near, finger_contact_rod, finger_scratch
+from .finger_contact import FingerContact, any_near, finger_contact_rod, finger_scratch
 from .forces import added_mass, linear_damping, morison_drag, rod_water_velocity
-from .rod_3d import ElasticScratch, elastic_scratch, rod3d_elastic_rod
+from .rod_3d import elastic_scratch, rod3d_elastic_rod
 from .rod_planar import planar_elastic_rod
 
 
@@ -100,10 +100,10 @@ class RodScratch(NamedTuple):
     """(N, D)."""
     acceleration: np.ndarray
     """(N, D)."""
-    elastic: ElasticScratch
-    """The 3-D elastic energy's (empty arrays in the planar model)."""
-    fingers: FingerScratch
-    """The contact between the fingers' (empty arrays without it)."""
+    elastic: np.ndarray
+    """The 3-D elastic energy's buffer (:func:`~.rod_3d.elastic_scratch`; empty in the planar model)."""
+    fingers: np.ndarray
+    """The finger contact's buffer (:func:`~.finger_contact.finger_scratch`; empty without it)."""
 
 
 @njit(cache=True, nogil=True)

@@ -102,42 +102,51 @@ class FingerContact(NamedTuple):
         return cls(stiffness, float(friction), disc.node_radius.copy(), eligible, np.ascontiguousarray(axes))
 
 
-class FingerScratch(NamedTuple):
-    """Work arrays of the contact between a gripper's F fingers of N nodes (:func:`finger_scratch`): passed in, so
-    that the search and the forces allocate nothing (a GPU thread has no heap to allocate from)."""
-
-    points: np.ndarray
-    """(:data:`N_SCRATCH_POINTS`, 3): 3-vectors, one a row."""
-    other: np.ndarray
-    """Another finger's world nodes at the start of the step, (N, 3)."""
-    matrix: np.ndarray
-    """(3, 3)."""
-    old: np.ndarray
-    """Every finger's world nodes at the start of the step, (F, N, 3)."""
-    motion: np.ndarray
-    """Each node's predicted displacement over the step [m], (F, N)."""
-    centres: np.ndarray
-    """The centre of each finger's runs of :data:`CHUNK_EDGES` edges, (F, runs, 3)."""
-    bounds: np.ndarray
-    """Their radii, (F, runs)."""
-    chunk_motion: np.ndarray
-    """The most a node of each run moves, (F, runs)."""
-
-
 N_SCRATCH_POINTS = 10
-"""Rows of :attr:`FingerScratch.points`."""
+"""3-vectors in the finger contact's work buffer (:func:`finger_views`)."""
+
+
+@njit(cache=True, nogil=True)
+def finger_scratch_size(n_fingers, n_nodes):
+    """Elements of the work buffer of the contact between ``n_fingers`` fingers of ``n_nodes`` nodes (0 for 0
+    fingers: a gripper without finger contact)."""
+    if n_fingers == 0:
+        return 0
+    n_chunks = (n_nodes - 2) // CHUNK_EDGES + 1
+    return 3 * N_SCRATCH_POINTS + 3 * n_nodes + 9 + 4 * n_fingers * n_nodes + 5 * n_fingers * n_chunks
 
 
 @njit(cache=True, nogil=True)
 def finger_scratch(n_fingers, n_nodes):
-    """:class:`FingerScratch` for ``n_fingers`` fingers of ``n_nodes`` nodes (0 fingers: empty arrays, for a gripper
-    without finger contact)."""
-    n_chunks = (n_nodes - 2) // CHUNK_EDGES + 1 if n_fingers else 0
-    return FingerScratch(np.empty((N_SCRATCH_POINTS if n_fingers else 0, 3)),
-                         np.empty((n_nodes if n_fingers else 0, 3)), np.empty((3 if n_fingers else 0, 3)),
-                         np.empty((n_fingers, n_nodes, 3)),
-                         np.empty((n_fingers, n_nodes)), np.empty((n_fingers, n_chunks, 3)),
-                         np.empty((n_fingers, n_chunks)), np.empty((n_fingers, n_chunks)))
+    """The finger contact's work buffer (:func:`finger_views`), passed in so that the search and the forces allocate
+    nothing (a GPU thread has no heap to allocate from); empty without finger contact (``n_fingers`` 0)."""
+    return np.empty(finger_scratch_size(n_fingers, n_nodes))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def finger_views(buffer, n_fingers, n_nodes):
+    """The work arrays in ``buffer`` (:func:`finger_scratch`): 3-vectors, one a row (:data:`N_SCRATCH_POINTS`, 3),
+    another finger's world nodes at the start of the step (N, 3), a 3×3 matrix, every finger's world nodes at the
+    start (F, N, 3), each node's predicted displacement over the step [m] (F, N), and the centre (F, runs, 3), radius
+    (F, runs) and most motion of a node (F, runs) of each finger's runs of :data:`CHUNK_EDGES` edges."""
+    n_chunks = (n_nodes - 2) // CHUNK_EDGES + 1
+    at = 0
+    points = buffer[at:at + 3 * N_SCRATCH_POINTS].reshape((N_SCRATCH_POINTS, 3))
+    at += 3 * N_SCRATCH_POINTS
+    other = buffer[at:at + 3 * n_nodes].reshape((n_nodes, 3))
+    at += 3 * n_nodes
+    matrix = buffer[at:at + 9].reshape((3, 3))
+    at += 9
+    old = buffer[at:at + 3 * n_fingers * n_nodes].reshape((n_fingers, n_nodes, 3))
+    at += 3 * n_fingers * n_nodes
+    motion = buffer[at:at + n_fingers * n_nodes].reshape((n_fingers, n_nodes))
+    at += n_fingers * n_nodes
+    centres = buffer[at:at + 3 * n_fingers * n_chunks].reshape((n_fingers, n_chunks, 3))
+    at += 3 * n_fingers * n_chunks
+    bounds = buffer[at:at + n_fingers * n_chunks].reshape((n_fingers, n_chunks))
+    at += n_fingers * n_chunks
+    chunk_motion = buffer[at:at + n_fingers * n_chunks].reshape((n_fingers, n_chunks))
+    return points, other, matrix, old, motion, centres, bounds, chunk_motion
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -204,16 +213,15 @@ def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near, scratch):
     :data:`NEAR_MARGIN` plus twice the node's and the other finger's nearby nodes' predicted motion, else
     −1. Arrays (R, N, S); ``contact`` is
     :class:`FingerContact`; ``near`` (R, N, F) int (empty, and left alone, without finger contact); ``scratch``
-    :class:`FingerScratch`."""
+    the work buffer (:func:`finger_scratch`)."""
     stiffness, radius, eligible, axes = contact.stiffness, contact.radius, contact.eligible, contact.axes
     if stiffness == 0.0:
         return
     n_fingers, n_nodes = eligible.shape[0], eligible.shape[1]
     for f in range(n_fingers):
         near[first_rod + f, :, :] = -1
-    old, motion, centres, bounds, chunk_motion = scratch.old, scratch.motion, scratch.centres, scratch.bounds, \
-        scratch.chunk_motion
-    point, nearest, candidate = scratch.points[0], scratch.points[1], scratch.points[2]
+    points, _, _, old, motion, centres, bounds, chunk_motion = finger_views(scratch, n_fingers, n_nodes)
+    point, nearest, candidate = points[0], points[1], points[2]
     for f in range(n_fingers):
         _finger_world(q_old[first_rod + f], axes[f], old[f])
         for i in range(n_nodes):
@@ -278,7 +286,8 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
     """Adds the other fingers' contact force on rod r's nodes [N] to ``force`` (N, S), in the rod's coordinates, and
     its Newton matrix to ``band`` (n, kd+1) (when ``hessian``), for the step of ``dt`` [s] from ``q_old`` with
     predictor ``q_pred`` (arrays (R, N, S); the other fingers stay where they were at the start of the step, see
-    the module notes). ``near`` (R, N, F) from :func:`find_near_fingers`; ``scratch`` :class:`FingerScratch`."""
+    the module notes). ``near`` (R, N, F) from :func:`find_near_fingers`; ``scratch`` the work buffer
+    (:func:`finger_scratch`)."""
     if contact.stiffness == 0.0:
         return
     stiffness, mu, radius, eligible, axes = contact.stiffness, contact.friction, contact.radius, contact.eligible, \
@@ -292,10 +301,9 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
     stride = q.shape[2]
     kd = band.shape[1] - 1
     own_axes = axes[f]
-    points = scratch.points
+    points, other_old, matrix, _, _, _, _, _ = finger_views(scratch, n_fingers, n_nodes)
     x, x_old, nearest, nearest_old, candidate = points[0], points[1], points[2], points[3], points[4]
     normal, slip, world_force, end_a, end_b = points[5], points[6], points[7], points[8], points[9]
-    other_old, matrix = scratch.other, scratch.matrix
     for o in range(n_fingers):
         if o == f:
             continue
@@ -371,6 +379,6 @@ def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, b
                     band[row, kd - a + b] += value
 
 
-__all__ = ["any_near", "SEARCH_WINDOW", "CHUNK_EDGES", "NEAR_MARGIN", "FingerContact", "FingerScratch",
-           "N_SCRATCH_POINTS", "finger_scratch", "find_near_fingers",
+__all__ = ["any_near", "SEARCH_WINDOW", "CHUNK_EDGES", "NEAR_MARGIN", "FingerContact", "N_SCRATCH_POINTS",
+           "finger_scratch_size", "finger_scratch", "finger_views", "find_near_fingers",
            "near_fingers_of_gripper", "finger_contact_rod"]

@@ -29,7 +29,6 @@ the finite-difference tests check them.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -276,39 +275,51 @@ def _cross_matrix_entry(vectors, row, i, j):
     return -sign * vectors[row, k]
 
 
-class ElasticScratch(NamedTuple):
-    """Work arrays of :func:`rod3d_elastic_rod` for rods of N nodes (:func:`elastic_scratch`): passed in, so that the
-    assembly allocates nothing (a GPU thread has no heap to allocate from, and on the CPU each allocation cost more
-    than binding the array)."""
+# The work arrays of one rod's assembly are views of one flat buffer (:func:`elastic_scratch`), passed in so that
+# the assembly allocates nothing (a GPU thread has no heap to allocate from). One array rather than nine, because
+# every array in a bundle costs reference counts each time Newton's inlined levels bind the bundle again.
 
-    tangent: np.ndarray
-    """(N − 1, 3)."""
-    director: np.ndarray
-    """(N − 1, 3)."""
-    m1: np.ndarray
-    """(N − 1, 3)."""
-    m2: np.ndarray
-    """(N − 1, 3)."""
-    reference_twist: np.ndarray
-    """(N,)."""
-    lengths: np.ndarray
-    """(N − 1,)."""
-    stencil: np.ndarray
-    """(6, 11, 11): :func:`_bend_twist`'s Hessian, gradient and scratch."""
-    vectors: np.ndarray
-    """(:data:`N_STENCIL_VECTORS`, 3)."""
-    stretch_hessian: np.ndarray
-    """(7, 7)."""
+
+@njit(cache=True, nogil=True)
+def elastic_scratch_size(n_nodes):
+    """Elements of :func:`rod3d_elastic_rod`'s work buffer for rods of ``n_nodes`` nodes (0 for 0 nodes)."""
+    if n_nodes == 0:
+        return 0
+    n_edges = n_nodes - 1
+    return 13 * n_edges + n_nodes + 6 * 11 * 11 + N_STENCIL_VECTORS * 3 + 7 * 7
 
 
 @njit(cache=True, nogil=True)
 def elastic_scratch(n_nodes):
-    """:class:`ElasticScratch` for rods of ``n_nodes`` nodes (0: empty arrays, for the planar model)."""
-    n_edges = max(n_nodes - 1, 0)
-    return ElasticScratch(np.empty((n_edges, 3)), np.empty((n_edges, 3)), np.empty((n_edges, 3)),
-                          np.empty((n_edges, 3)), np.empty(n_nodes), np.empty(n_edges),
-                          np.empty((6 if n_nodes else 0, 11, 11)), np.empty((N_STENCIL_VECTORS if n_nodes else 0, 3)),
-                          np.empty((7 if n_nodes else 0, 7)))
+    """:func:`rod3d_elastic_rod`'s work buffer for rods of ``n_nodes`` nodes (0: empty, for the planar model)."""
+    return np.empty(elastic_scratch_size(n_nodes))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def elastic_views(buffer, n_nodes):
+    """The work arrays in ``buffer`` (:func:`elastic_scratch`): the edges' tangents, reference directors and material
+    directors m1, m2 (N − 1, 3), the reference twist (N,), the edge lengths (N − 1,), :func:`_bend_twist`'s stencil
+    (6, 11, 11) and vectors (:data:`N_STENCIL_VECTORS`, 3), and a stretch Hessian (7, 7)."""
+    n_edges = n_nodes - 1
+    at = 0
+    tangent = buffer[at:at + 3 * n_edges].reshape((n_edges, 3))
+    at += 3 * n_edges
+    director = buffer[at:at + 3 * n_edges].reshape((n_edges, 3))
+    at += 3 * n_edges
+    m1 = buffer[at:at + 3 * n_edges].reshape((n_edges, 3))
+    at += 3 * n_edges
+    m2 = buffer[at:at + 3 * n_edges].reshape((n_edges, 3))
+    at += 3 * n_edges
+    reference_twist = buffer[at:at + n_nodes]
+    at += n_nodes
+    lengths = buffer[at:at + n_edges]
+    at += n_edges
+    stencil = buffer[at:at + 6 * 11 * 11].reshape((6, 11, 11))
+    at += 6 * 11 * 11
+    vectors = buffer[at:at + N_STENCIL_VECTORS * 3].reshape((N_STENCIL_VECTORS, 3))
+    at += N_STENCIL_VECTORS * 3
+    stretch_hessian = buffer[at:at + 7 * 7].reshape((7, 7))
+    return tangent, director, m1, m2, reference_twist, lengths, stencil, vectors, stretch_hessian
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -317,12 +328,12 @@ def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, 
     """Elastic energy of one rod [J]; adds −∇E to ``force`` (N, 4) and ∇²E to ``band`` (4N, 11).
 
     ``q`` (N, 4); the start-of-step frames: ``tangent_old`` and ``director_old`` (N − 1, 3), ``ref_twist_old`` (N);
-    ``natural_curvature`` κ̄ of the rod; ``scratch`` :class:`ElasticScratch`.
+    ``natural_curvature`` κ̄ of the rod; ``scratch`` the work buffer (:func:`elastic_scratch`).
     """
     n_nodes = q.shape[0]
     n_edges = n_nodes - 1
     energy = 0.0
-    tangent, d1, m1, m2, ref_twist, lengths, stencil, vectors, stretch_hess = scratch
+    tangent, d1, m1, m2, ref_twist, lengths, stencil, vectors, stretch_hess = elastic_views(scratch, n_nodes)
     hess = stencil[0]
     stretch_hess[:, :] = 0.0  # the twist's rows and columns stay zero
     rod_frames(q, tangent_old, director_old, ref_twist_old, tangent, d1, ref_twist, m1, m2, lengths)

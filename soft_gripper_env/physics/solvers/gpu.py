@@ -39,9 +39,9 @@ from numba import njit
 from numba.core import types
 
 from ..kernels.assembly import N_DESIGN_FIELDS, RodScratch, StepInputs, named_rods
-from ..kernels.finger_contact import CHUNK_EDGES, N_SCRATCH_POINTS, FingerScratch
+from ..kernels.finger_contact import finger_scratch_size
 from ..kernels.forces import project_water
-from ..kernels.rod_3d import N_STENCIL_VECTORS, ElasticScratch, rod_frames
+from ..kernels.rod_3d import elastic_scratch_size, elastic_views, rod_frames
 from ..scene.forces import ForceTerms
 from .newton import NewtonWork, SolverArrays, SolveResult, step_gripper_rods
 
@@ -169,11 +169,10 @@ def _build_rods_kernel(shape: RodsKernelShape):
     band = 3 * S  # kd + 1: the planar band's half width is 5, the 3-D one's 10 (scene.discretization)
     three_d = S == 4
     edges = N - 1
-    chunks = (N - 2) // CHUNK_EDGES + 1
-    touch = shape.finger_contact
-    contact_fingers = F if touch else 0
+    contact_fingers = F if shape.finger_contact else 0
     framed = F if three_d else 1
-    e3, n3 = (edges, N) if three_d else (0, 0)  # the 3-D elastic scratch's edges and nodes
+    elastic_size = elastic_scratch_size(N if three_d else 0)
+    finger_size = finger_scratch_size(contact_fingers, N)
     float64, int64, boolean = types.float64, types.int64, types.boolean
 
     @cuda.jit
@@ -223,33 +222,19 @@ def _build_rods_kernel(shape: RodsKernelShape):
         for f in range(F):
             every_rod[f] = True
         motion = cuda.local.array((2, N, D), float64)
-        # arrays a model or a gripper does not use are empty slices (a local array has at least one element)
-        scratch = RodScratch(
-            motion[0], motion[1],
-            ElasticScratch(cuda.local.array((e3 or 1, 3), float64)[:e3], cuda.local.array((e3 or 1, 3), float64)[:e3],
-                           cuda.local.array((e3 or 1, 3), float64)[:e3], cuda.local.array((e3 or 1, 3), float64)[:e3],
-                           cuda.local.array(n3 or 1, float64)[:n3], cuda.local.array(e3 or 1, float64)[:e3],
-                           cuda.local.array((6, 11, 11), float64)[:6 if three_d else 0],
-                           cuda.local.array((N_STENCIL_VECTORS, 3), float64)[:N_STENCIL_VECTORS if three_d else 0],
-                           cuda.local.array((7, 7), float64)[:7 if three_d else 0]),
-            FingerScratch(cuda.local.array((N_SCRATCH_POINTS, 3), float64)[:N_SCRATCH_POINTS if touch else 0],
-                          cuda.local.array((N, 3), float64)[:N if touch else 0],
-                          cuda.local.array((3, 3), float64)[:3 if touch else 0],
-                          cuda.local.array((F, N, 3), float64)[:contact_fingers],
-                          cuda.local.array((F, N), float64)[:contact_fingers],
-                          cuda.local.array((F, chunks, 3), float64)[:contact_fingers],
-                          cuda.local.array((F, chunks), float64)[:contact_fingers],
-                          cuda.local.array((F, chunks), float64)[:contact_fingers]))
+        # a buffer a model or a gripper does not use is an empty slice (a local array has at least one element)
+        scratch = RodScratch(motion[0], motion[1], cuda.local.array(elastic_size or 1, float64)[:elastic_size],
+                             cuda.local.array(finger_size or 1, float64)[:finger_size])
         vector = cuda.local.array(1, float64)[:0]
         matrix = cuda.local.array((1, 1), float64)[:0]
         tensor = cuda.local.array((1, 1, 6), float64)[:0]
         work = NewtonWork(cuda.local.array((N, S), float64), scratch, cuda.local.array((F, n, band), float64),
-                           tensor, cuda.local.array((F, n), float64), tensor, tensor, matrix,
-                           cuda.local.array((F, n), float64)[:contact_fingers], ratios[1], flags[3],
-                           cuda.local.array(F, boolean), cuda.local.array(F, boolean), vector, matrix, vector, vector,
-                           matrix, matrix, cuda.local.array(band, float64),
-                           cuda.local.array((1, 1, D), float64)[:0], cuda.local.array((D, D), float64)[:0], flags[4],
-                           ratios[2])
+                          tensor, cuda.local.array((F, n), float64), tensor, tensor, matrix,
+                          cuda.local.array((F, n), float64)[:contact_fingers], ratios[1], flags[3],
+                          cuda.local.array(F, boolean), cuda.local.array(F, boolean), vector, matrix, vector, vector,
+                          matrix, matrix, cuda.local.array(band, float64),
+                          cuda.local.array((1, 1, D), float64)[:0], cuda.local.array((D, D), float64)[:0], flags[4],
+                          ratios[2])
         rods = named_rods(rods_design + frames_old)
         terms = ForceTerms(*terms_fields)
         solver = SolverArrays(*solver_fields)
@@ -265,9 +250,9 @@ def _build_rods_kernel(shape: RodsKernelShape):
                 ok = ok and result.converged[f]
                 most = max(most, result.iterations[f])
                 if three_d:
+                    _, _, m1, m2, _, lengths, _, _, _ = elastic_views(scratch.elastic, N)
                     rod_frames(q[f], frames_old[0][f], frames_old[1][f], frames_old[2][f], frames[0][f],
-                               frames[1][f], frames[2][f], scratch.elastic.m1, scratch.elastic.m2,
-                               scratch.elastic.lengths)
+                               frames[1][f], frames[2][f], m1, m2, lengths)
                 for i in range(N):
                     for s in range(S):
                         ok = ok and math.isfinite(q[f, i, s]) and math.isfinite(velocity[f, i, s])

@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..kernels.assembly import StepInputs, assemble_rod, named_rods, rod_scratch
+from ..kernels.assembly import RodScratch, StepInputs, assemble_rod, named_rods, rod_scratch
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
 from ..kernels.contact import along_surface, onto_surface, rotate_node, tangent_basis
 from ..kernels.finger_contact import any_near, near_fingers_of_gripper
@@ -262,8 +262,8 @@ class NewtonWork(NamedTuple):
     (:func:`_new_work`), the thread's own arrays on the GPU (:mod:`.gpu`)."""
 
     force: np.ndarray
-    rod: tuple
-    """:class:`~..kernels.assembly.RodScratch`."""
+    rod: RodScratch
+    """The rod assembly's work arrays."""
     bands: np.ndarray
     coupling: np.ndarray
     x0: np.ndarray
@@ -306,14 +306,14 @@ def _new_work(q, dim, n_fingers, coupled, contact, fingers):
     surface = surface + (flags[3], ratios[1])
     if coupled:
         return NewtonWork(*rods, np.zeros((n_fingers, n, 6)), np.empty((n_fingers, n)), np.empty((n_fingers, n, 6)),
-                           np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)), np.zeros((n_fingers, n)),
-                           ratios[0], flags[0], flags[1], flags[2], np.empty(6), np.empty((6, 6)), np.empty(6),
-                           np.empty(6), np.empty((3, 3)), np.empty((n, 6)), np.empty(band_width + 1),
-                           *surface)
+                          np.empty((n_fingers, 6, 6)), np.empty((n_fingers, 6)), np.zeros((n_fingers, n)),
+                          ratios[0], flags[0], flags[1], flags[2], np.empty(6), np.empty((6, 6)), np.empty(6),
+                          np.empty(6), np.empty((3, 3)), np.empty((n, 6)), np.empty(band_width + 1),
+                          *surface)
     rod_delta = np.zeros((n_fingers, n)) if fingers else matrix
     return NewtonWork(*rods, tensor, np.empty((n_fingers, n)), tensor, tensor, matrix, rod_delta, ratios[0], flags[0],
-                       flags[1], flags[2], vector, matrix, vector, vector, matrix, matrix,
-                       np.empty(band_width + 1), *surface)
+                      flags[1], flags[2], vector, matrix, vector, vector, matrix, matrix,
+                      np.empty(band_width + 1), *surface)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
