@@ -10,12 +10,12 @@ import os
 import subprocess
 import sys
 import textwrap
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from benchmarks.gpu_speed import fingers_alone
 from soft_gripper_env.grasp_task import GraspTask, task_episode
 from soft_gripper_env.physics import Simulator
 from soft_gripper_env.physics.solvers.gpu import GpuUnavailable, GpuUnsupported, cuda_module
@@ -25,20 +25,15 @@ ROOT = Path(__file__).resolve().parents[2]
 # the fingers of the task's first two episodes without their specimens (each its own current), two intervals of
 # three steps with a rate per finger, the second with the first gripper stopped; printed as JSON
 _RUN = """
-import json, sys
-from dataclasses import replace
+import json
 import numpy as np
-from soft_gripper_env.grasp_task import GraspTask, task_episode
+from benchmarks.gpu_speed import fingers_alone
 from soft_gripper_env.physics import Simulator
-
-def fingers(model, seeds):
-    task = GraspTask(model=model)
-    return [replace(task_episode(task, np.random.default_rng(seed), {}).scene, grasped_object=None) for seed in seeds]
 
 out = {}
 for model in ("planar", "3d"):
     for device in ("cpu", "cuda"):
-        sim = Simulator(fingers(model, (0, 1)), device=device)
+        sim = Simulator(fingers_alone(model, 2)[0], device=device)
         first = sim.advance(sim.initial_state(), -0.02, [[-0.3, -0.1, 0.2], [0.3, -0.3, -0.2]], 3, (-0.2, 0.2))
         second = sim.advance(first.state, first.natural_curvature, 0.25, 3, (-0.2, 0.2), running=[False, True],
                              clock=first.clock)
@@ -81,11 +76,6 @@ needs_numba_cuda = pytest.mark.skipif(not _numba_cuda_installed(),
                                       reason="numba-cuda is not installed (the gpu extra)")
 
 
-def _fingers(model: str, seeds) -> list:
-    task = GraspTask(model=model)
-    return [replace(task_episode(task, np.random.default_rng(seed), {}).scene, grasped_object=None) for seed in seeds]
-
-
 @pytest.mark.slow
 @needs_numba_cuda
 def test_simulated_kernel_steps_exactly_as_the_cpu():
@@ -112,16 +102,13 @@ def test_kernels_compile_to_ptx_for_sm_90():
     lacks."""
     script = """
     import json, time
-    from dataclasses import replace
-    import numpy as np
-    from soft_gripper_env.grasp_task import GraspTask, task_episode
+    from benchmarks.gpu_speed import fingers_alone
     from soft_gripper_env.physics import Simulator
     from soft_gripper_env.physics.solvers.gpu import rods_ptx
 
     out = {}
     for model in ("planar", "3d"):
-        task = GraspTask(model=model)
-        sim = Simulator([replace(task_episode(task, np.random.default_rng(0), {}).scene, grasped_object=None)])
+        sim = Simulator(fingers_alone(model, 1)[0])
         work = sim._working_state(sim.initial_state(), copy=True)
         start = time.perf_counter()
         try:
@@ -145,7 +132,7 @@ def test_kernels_compile_to_ptx_for_sm_90():
 
 
 def test_device_is_checked():
-    scene = _fingers("planar", (0,))[0]
+    scene = fingers_alone("planar", 1)[0][0]
     with pytest.raises(ValueError, match="device = 'tpu'"):
         Simulator(scene, device="tpu")
 
@@ -165,7 +152,7 @@ def test_without_a_gpu_the_error_says_what_to_install():
     else:
         pytest.skip("a GPU (or the simulator) is available here")
     with pytest.raises(GpuUnavailable, match=r'pip install -e "\.\[gpu\]"'):
-        Simulator(_fingers("planar", (0,))[0], device="cuda")
+        Simulator(fingers_alone("planar", 1)[0][0], device="cuda")
 
 
 def _gpu_available() -> bool:
@@ -182,8 +169,7 @@ def _gpu_available() -> bool:
 def test_gpu_trajectory_equals_the_cpu_one_over_one_second(model):
     """On a real GPU (which fuses multiplies and adds where the CPU rounds twice), rods alone stay within 1e-9 m of
     the CPU path over 1 s of random rates."""
-    task = GraspTask(model=model)
-    scenes = _fingers(model, range(8))
+    scenes, task = fingers_alone(model, 8)
     rng = np.random.default_rng(0)
     rates = task.max_curvature_rate * rng.uniform(-1.0, 1.0, (int(round(1.0 / task.control_dt)), 8, 3))
     positions = {}
