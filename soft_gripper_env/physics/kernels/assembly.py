@@ -92,29 +92,6 @@ class StepInputs(NamedTuple):
     int (:func:`~.finger_contact.find_near_fingers`); empty without finger contact."""
 
 
-class RodScratch(NamedTuple):
-    """Work arrays of one rod's assembly (:func:`rod_scratch`), passed in so that it allocates nothing: made once per
-    solve on the CPU, and per thread on the GPU, which has no heap to allocate from."""
-
-    velocity: np.ndarray
-    """(N, D)."""
-    acceleration: np.ndarray
-    """(N, D)."""
-    elastic: np.ndarray
-    """The 3-D elastic energy's buffer (:func:`~.rod_3d.elastic_scratch`; empty in the planar model)."""
-    fingers: np.ndarray
-    """The finger contact's buffer (:func:`~.finger_contact.finger_scratch`; empty without it)."""
-
-
-@njit(cache=True, nogil=True)
-def rod_scratch(n_nodes, dim, stride, n_fingers, finger_contact):
-    """:class:`RodScratch` for rods of ``n_nodes`` nodes with ``stride`` coordinates each, ``dim`` of them a
-    position, of a gripper of ``n_fingers`` fingers, with or without ``finger_contact``."""
-    motion = np.empty((2, n_nodes, dim))
-    return RodScratch(motion[0], motion[1], elastic_scratch(n_nodes if stride == 4 else 0),
-                      finger_scratch(n_fingers if finger_contact else 0, n_nodes))
-
-
 @njit(cache=True, nogil=True, error_model="numpy")
 def external_forces_rod(positions, start_positions, velocities, accelerations, water, terms, velocity_derivative,
                         acceleration_derivative, stride, force, band):
@@ -145,12 +122,13 @@ def external_forces(positions, start_positions, velocities, accelerations, water
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def assemble_rod(r, q, step, rods, terms, hessian, force, band, scratch):
+def assemble_rod(r, q, step, rods, terms, hessian, force, band, velocity, acceleration, elastic, fingers):
     """Overwrites ``force`` (N, S) with rod r's total force [N] at coordinates ``q`` (R, N, S) of the backward-Euler
-    step ``step`` (:class:`StepInputs`), and ``band`` (n, kd+1) with −∂f/∂q (when ``hessian``); ``scratch`` is
-    :class:`RodScratch`. ``rods`` is :class:`RodArrays`, ``terms`` the scene's :class:`~..scene.forces.ForceTerms`.
-    Returns its elastic energy [J]."""
-    velocity, acceleration = scratch.velocity, scratch.acceleration
+    step ``step`` (:class:`StepInputs`), and ``band`` (n, kd+1) with −∂f/∂q (when ``hessian``). Work arrays, passed
+    in so that it allocates nothing (a GPU thread has no heap to allocate from): ``velocity`` and ``acceleration``
+    (N, D), the 3-D energy's buffer ``elastic`` (:func:`~.rod_3d.elastic_scratch`; empty in the planar model) and the
+    finger contact's ``fingers`` (:func:`~.finger_contact.finger_scratch`; empty without it). ``rods`` is
+    :class:`RodArrays`, ``terms`` the scene's :class:`~..scene.forces.ForceTerms`. Returns its elastic energy [J]."""
     force[:] = 0.0
     band[:] = 0.0
     stride = q.shape[2]
@@ -161,7 +139,7 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, scratch):
         energy = rod3d_elastic_rod(q[r], rods.tangent[r], rods.director[r], rods.reference_twist[r],
                                    rods.rest_length, rods.stretch_stiffness, rods.bend_stiffness,
                                    rods.twist_stiffness, rods.voronoi_length, step.natural_curvature[r], force,
-                                   band, hessian, scratch.elastic)
+                                   band, hessian, elastic)
     n_nodes, dim = velocity.shape
     dt = step.dt
     for i in range(n_nodes):
@@ -173,18 +151,19 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, scratch):
     near = step.near
     # finger contact is on, and the rod is near another finger: the tests cost less than binding the call's arrays
     if near.size > 0 and any_near(near, r):
-        finger_contact_rod(r, q, step.q_old, step.q_pred, dt, rods.fingers, near, hessian, force, band,
-                           scratch.fingers)
+        finger_contact_rod(r, q, step.q_old, step.q_pred, dt, rods.fingers, near, hessian, force, band, fingers)
     return energy
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def assemble(q, step, rods, terms, hessian, force, band):
     """Every rod's force (R, N, S) [N] and −∂f/∂q (R, n, kd+1), written into ``force`` and ``band``."""
-    scratch = rod_scratch(q.shape[1], step.water.shape[1], q.shape[2], rods.fingers.eligible.shape[0],
-                          step.near.size > 0)
+    n_nodes = q.shape[1]
+    motion = np.empty((2, n_nodes, step.water.shape[1]))  # velocity and acceleration
+    elastic = elastic_scratch(n_nodes if q.shape[2] == 4 else 0)
+    fingers = finger_scratch(rods.fingers.eligible.shape[0] if step.near.size > 0 else 0, n_nodes)
     for r in range(q.shape[0]):
-        assemble_rod(r, q, step, rods, terms, hessian, force[r], band[r], scratch)
+        assemble_rod(r, q, step, rods, terms, hessian, force[r], band[r], motion[0], motion[1], elastic, fingers)
 
 
 @dataclass(frozen=True, eq=False)
@@ -215,6 +194,5 @@ def evaluate_force(model: ForceModel, disc: Discretization, fluid: Fluid, ctx: S
                     disc.stride, force, system_band)
 
 
-__all__ = ["RodArrays", "N_DESIGN_FIELDS", "named_rods", "StepInputs", "RodScratch", "rod_scratch",
-           "external_forces_rod", "external_forces",
+__all__ = ["RodArrays", "N_DESIGN_FIELDS", "named_rods", "StepInputs", "external_forces_rod", "external_forces",
            "assemble_rod", "assemble", "StepContext", "evaluate_force"]

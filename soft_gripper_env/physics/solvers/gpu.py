@@ -38,7 +38,7 @@ import numpy as np
 from numba import njit
 from numba.core import types
 
-from ..kernels.assembly import N_DESIGN_FIELDS, RodScratch, StepInputs, named_rods
+from ..kernels.assembly import N_DESIGN_FIELDS, StepInputs, named_rods
 from ..kernels.finger_contact import finger_scratch_size
 from ..kernels.forces import project_water
 from ..kernels.rod_3d import elastic_scratch_size, elastic_views, rod_frames
@@ -223,13 +223,14 @@ def _build_rods_kernel(shape: RodsKernelShape):
             every_rod[f] = True
         motion = cuda.local.array((2, N, D), float64)
         # a buffer a model or a gripper does not use is an empty slice (a local array has at least one element)
-        scratch = RodScratch(motion[0], motion[1], cuda.local.array(elastic_size or 1, float64)[:elastic_size],
-                             cuda.local.array(finger_size or 1, float64)[:finger_size])
+        elastic = cuda.local.array(elastic_size or 1, float64)[:elastic_size]
         vector = cuda.local.array(1, float64)[:0]
         matrix = cuda.local.array((1, 1), float64)[:0]
         tensor = cuda.local.array((1, 1, 6), float64)[:0]
-        work = NewtonWork(cuda.local.array((N, S), float64), scratch, cuda.local.array((F, n, band), float64),
-                          tensor, cuda.local.array((F, n), float64), tensor, tensor, matrix,
+        work = NewtonWork(cuda.local.array((N, S), float64), motion[0], motion[1], elastic,
+                          cuda.local.array(finger_size or 1, float64)[:finger_size],
+                          cuda.local.array((F, n, band), float64), tensor, cuda.local.array((F, n), float64),
+                          tensor, tensor, matrix,
                           cuda.local.array((F, n), float64)[:contact_fingers], ratios[1], flags[3],
                           cuda.local.array(F, boolean), cuda.local.array(F, boolean), vector, matrix, vector, vector,
                           matrix, matrix, cuda.local.array(band, float64),
@@ -250,7 +251,7 @@ def _build_rods_kernel(shape: RodsKernelShape):
                 ok = ok and result.converged[f]
                 most = max(most, result.iterations[f])
                 if three_d:
-                    _, _, m1, m2, _, lengths, _, _, _ = elastic_views(scratch.elastic, N)
+                    _, _, m1, m2, _, lengths, _, _, _ = elastic_views(elastic, N)
                     rod_frames(q[f], frames_old[0][f], frames_old[1][f], frames_old[2][f], frames[0][f],
                                frames[1][f], frames[2][f], m1, m2, lengths)
                 for i in range(N):

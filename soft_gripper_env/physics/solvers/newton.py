@@ -29,11 +29,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..kernels.assembly import RodScratch, StepInputs, assemble_rod, named_rods, rod_scratch
+from ..kernels.assembly import StepInputs, assemble_rod, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
 from ..kernels.contact import along_surface, onto_surface, rotate_node, tangent_basis
-from ..kernels.finger_contact import any_near, near_fingers_of_gripper
+from ..kernels.finger_contact import any_near, finger_scratch, near_fingers_of_gripper
 from ..kernels.linalg import factor_banded_symmetric, solve_factored, solve_factored_six_columns, symmetric_band_entry
+from ..kernels.rod_3d import elastic_scratch
 from ..scene.forces import ForceTerms
 
 
@@ -262,8 +263,12 @@ class NewtonWork(NamedTuple):
     (:func:`_new_work`), the thread's own arrays on the GPU (:mod:`.gpu`)."""
 
     force: np.ndarray
-    rod: RodScratch
-    """The rod assembly's work arrays."""
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    elastic: np.ndarray
+    """The 3-D energy's work buffer (:func:`~..kernels.rod_3d.elastic_scratch`; empty in the planar model)."""
+    fingers: np.ndarray
+    """The finger contact's work buffer (:func:`~..kernels.finger_contact.finger_scratch`; empty without it)."""
     bands: np.ndarray
     coupling: np.ndarray
     x0: np.ndarray
@@ -300,8 +305,9 @@ def _new_work(q, dim, n_fingers, coupled, contact, fingers):
     matrix, tensor = vector.reshape((0, 0)), vector.reshape((0, 0, 6))  # views: no allocation of their own
     # per-rod flags and ratios as rows of two arrays: rod_ratio, last_ratio; active, touching, factored, rubbing
     ratios, flags = np.empty((2, n_fingers)), np.zeros((4, n_fingers), dtype=np.bool_)
-    rods = (np.empty((n_nodes, stride)), rod_scratch(n_nodes, dim, stride, n_fingers, fingers),
-            np.empty((n_fingers, n, band_width + 1)))
+    motion = np.empty((2, n_nodes, dim))  # velocity and acceleration
+    rods = (np.empty((n_nodes, stride)), motion[0], motion[1], elastic_scratch(n_nodes if stride == 4 else 0),
+            finger_scratch(n_fingers if fingers else 0, n_nodes), np.empty((n_fingers, n, band_width + 1)))
     surface = (np.zeros((n_fingers, n_nodes, dim)), np.empty((dim, dim))) if contact else (tensor, matrix)
     surface = surface + (flags[3], ratios[1])
     if coupled:
@@ -323,7 +329,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
     active, touching, rod_ratio, factored = work.active, work.touching, work.rod_ratio, work.factored
     converged, iterations_of, ratio = result.converged, result.iterations, result.ratio
     residual, mass_term, bands, x0 = result.residual, solver.mass_term, work.bands, work.x0
-    scratch = (work.force, work.rod)
+    scratch = (work.force, work.velocity, work.acceleration, work.elastic, work.fingers)
     rubbing, last_ratio = work.rubbing, work.last_ratio
     measured = free if holds is None else holds.measured
     n_fingers = solver.n_fingers
@@ -639,13 +645,13 @@ def _unrotate_steps(first_rod, holds, work):
 def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_side, largest, band, scratch, matrix):
     """Assembles rod r and writes its residual (n,) into ``residual`` and its negation, the Newton step's right-hand
     side, into ``right_hand_side`` (n,), its Newton matrix into ``band`` (n, kd+1) (the elastic part when ``matrix``:
-    the forces do not depend on it); ``scratch`` holds the work arrays
-    force (N, S) and :class:`~..kernels.assembly.RodScratch`. Returns the rod's largest scaled residual and ``largest``
-    updated with it (NaN is caught: it never compares as small)."""
+    the forces do not depend on it); ``scratch`` holds the work arrays force (N, S), velocity and acceleration
+    (N, D) and the 3-D energy's and the finger contact's buffers. Returns the rod's largest scaled residual and
+    ``largest`` updated with it (NaN is caught: it never compares as small)."""
     # the caller passes rows and work arrays it took out of their bundles once per solve: this runs once per rod and
     # Newton iteration, and each bundle member or array view read here would cost an atomic reference count
-    force, rod_work = scratch
-    assemble_rod(r, q, step, rods, terms, matrix, force, band, rod_work)
+    force, velocity, acceleration, elastic, fingers = scratch
+    assemble_rod(r, q, step, rods, terms, matrix, force, band, velocity, acceleration, elastic, fingers)
     own = 0.0
     mass_term, tolerance_inverse, q_pred = solver.mass_term, solver.tolerance_inverse, step.q_pred
     n_nodes, stride = force.shape
@@ -832,7 +838,7 @@ def step_gripper_rods(b, velocity_old, acceleration_old, step, rods, terms, solv
     for r in range(b * n_fingers, (b + 1) * n_fingers):
         _predict_rod(r, q_old, velocity_old, acceleration_old, dt, step.q_pred, q)
     if step.near.size > 0:
-        near_fingers_of_gripper(b * n_fingers, q_old, step.q_pred, rods.fingers, step.near, work.rod.fingers)
+        near_fingers_of_gripper(b * n_fingers, q_old, step.q_pred, rods.fingers, step.near, work.fingers)
     _solve_gripper(b, q, step, rods, terms, solver, solver.clamp_free, None, None, every_rod, result, work)
     for r in range(b * n_fingers, (b + 1) * n_fingers):
         _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
