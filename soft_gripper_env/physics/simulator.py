@@ -21,9 +21,9 @@ import numpy as np
 from .kernels.assembly import N_DESIGN_FIELDS, RodArrays, StepInputs, assemble
 from .kernels.body import BodyArrays, BodyMotion, BodyState, palm_reactions
 from .kernels.contact import contact_reactions, object_in_rod_frames
-from .kernels.finger_contact import FingerContact, find_near_fingers
+from .kernels.finger_contact import FingerContact, find_near_fingers, finger_scratch
 from .kernels.forces import rod_water_velocity
-from .kernels.rod_3d import rod3d_elastic, rod3d_update_frames
+from .kernels.rod_3d import elastic_scratch, rod3d_elastic, rod3d_update_frames
 from .kernels.rod_planar import planar_elastic
 from .scene.fluid import Current, CurrentBatch
 from .scene.forces import BodyLoads, ForceTerms
@@ -600,7 +600,7 @@ class Simulator:
         ``frames`` to the coordinates ``q`` (R, N, 4)."""
         R, N = self.n_rods, self.disc.n_nodes
         transported = np.empty((R, N - 1, 3)), np.empty((R, N - 1, 3)), np.empty((R, N))
-        rod3d_update_frames(q, *frames, *transported)
+        rod3d_update_frames(q, *frames, *transported, elastic_scratch(N))
         return transported
 
     def _frames(self, state: RodState):
@@ -618,7 +618,8 @@ class Simulator:
         force = np.empty(q.shape)
         band = np.empty((R, disc.n_dofs, disc.band_width + 1))
         step = StepInputs(q_old, q_pred, natural_curvature, self._water(time)[1], dt, self._near_buffer())
-        find_near_fingers(q_old, q_pred, self._finger_contact, step.near)
+        find_near_fingers(q_old, q_pred, self._finger_contact, step.near,
+                          finger_scratch(self.n_fingers if step.near.size else 0, disc.n_nodes))
         assemble(q, step, self._rod_arrays(frames_old), self._force_terms, hessian, force, band)
         return force, band
 

@@ -23,7 +23,8 @@ from soft_gripper_env.physics.kernels.contact import contact_reactions, object_i
 
 def reachable(obj, finger_directions, length, planar):
     """Which fingers the corrector searches for contact with ``obj`` (on the fingers' centre lines)."""
-    return within_reach(*object_in_rod_frames(obj, finger_directions, np.zeros(20), planar), length)
+    reach = np.empty(finger_directions.shape[0], dtype=bool)
+    return within_reach(*object_in_rod_frames(obj, finger_directions, np.zeros(20), planar), length, reach)
 
 
 def segment_distance(points, start, end):
@@ -505,7 +506,7 @@ def test_the_corrector_lets_go_of_a_node_held_on_the_object_segment():
                              np.zeros((n_rods, n_nodes, dim)), np.zeros((n_rods, n_nodes), dtype=np.bool_),
                              np.zeros(n_rods, dtype=np.bool_))
     contact_changes(positions, positions.copy(), positions.copy(), residual, holds, view, np.full(n_rods, np.inf),
-                    solver, True, True, changes)
+                    solver, True, True, changes, np.empty(n_rods, dtype=np.int64))
     assert changes.adhesive[0, 1] and changes.changed[0]
     assert not changes.adhesive[1].any() and not changes.changed[1]
     assert np.isfinite(changes.friction).all()

@@ -15,7 +15,7 @@ from soft_gripper_env.physics import (
     evaluate_force,
     paper_finger,
 )
-from soft_gripper_env.physics.kernels.rod_3d import rod3d_elastic, rod3d_update_frames
+from soft_gripper_env.physics.kernels.rod_3d import elastic_scratch, rod3d_elastic, rod3d_update_frames
 from soft_gripper_env.physics.kernels.rod_planar import planar_elastic
 
 
@@ -84,7 +84,7 @@ class Rod3D:
         self.tangent, self.director = t[None], a[None]
         ref_twist = np.empty((1, n_nodes))
         rod3d_update_frames(q, self.tangent, self.director, np.zeros((1, n_nodes)), np.empty_like(self.tangent),
-                            np.empty_like(self.director), ref_twist)
+                            np.empty_like(self.director), ref_twist, elastic_scratch(n_nodes))
         self.ref_twist = ref_twist
         self.kappa_bar = np.array([rng.uniform(-0.6, 0.6)])
         self.n_nodes = n_nodes

@@ -112,7 +112,7 @@ def test_straight_fingers_at_their_shared_root_do_not_touch():
     assert not roots[0, 2:5, 1, 0].any() and roots[0, 5, 1, 0]  # 21, 32, 42 mm < 40 + 10 mm < 53 mm
     q = disc.rest_q.copy()
     near = np.empty((2, disc.n_nodes, 2), dtype=np.int64)
-    find_near_fingers(q, q, contact, near)
+    find_near_fingers(q, q, contact, near, _scratch(contact))
     force = np.zeros((disc.n_nodes, disc.stride))
     band = np.zeros((disc.n_dofs, disc.band_width + 1))
     finger_contact_rod(0, q, q, q, 0.01, contact, near, True, force, band, _scratch(contact))
@@ -132,7 +132,7 @@ def test_penalty_and_friction_against_closed_forms(slip_speed):
     q = q_old.copy()
     q[0, node, 0] += slip_speed * dt
     near = np.empty((2, disc.n_nodes, 2), dtype=np.int64)
-    find_near_fingers(q_old, q_old, contact, near)  # both at rest at the start of the step
+    find_near_fingers(q_old, q_old, contact, near, _scratch(contact))  # both at rest at the start of the step
     assert near[0, node, 1] >= 0
     force = np.zeros((disc.n_nodes, disc.stride))
     band = np.zeros((disc.n_dofs, disc.band_width + 1))
@@ -159,7 +159,7 @@ def test_mirror_share_of_the_overlap():
     q = q_old.copy()
     q[0, node, 2] -= closing
     near = np.empty((2, disc.n_nodes, 2), dtype=np.int64)
-    find_near_fingers(q_old, q_old, contact, near)
+    find_near_fingers(q_old, q_old, contact, near, _scratch(contact))
     force = np.zeros((disc.n_nodes, disc.stride))
     band = np.zeros((disc.n_dofs, disc.band_width + 1))
     finger_contact_rod(0, q, q_old, q_old, dt, contact, near, False, force, band, _scratch(contact))
@@ -180,7 +180,7 @@ def test_resting_fingers_push_each_other_equally(closed):
         eligible[a, :, b, :] = contact.eligible[a, :, b, :]
         pair = contact._replace(eligible=eligible)
         near = np.empty((3, disc.n_nodes, 3), dtype=np.int64)
-        find_near_fingers(q, q, pair, near)
+        find_near_fingers(q, q, pair, near, _scratch(pair))
         force = np.zeros((disc.n_nodes, disc.stride))
         finger_contact_rod(a, q, q, q, 0.01, pair, near, False, force, np.zeros((disc.n_dofs, disc.band_width + 1)),
                            _scratch(pair))
@@ -232,7 +232,7 @@ def test_newton_blocks_are_the_penalty_hessian_on_oblique_normals(model):
         world = (anchors[node] + (0.02 - overlap) * a) * along + (0.02 - overlap) * b * up
         q_old[0, node, :disc.dim] = world if model == "3d" else (world @ along, world[2])
     near = np.empty((2, disc.n_nodes, 2), dtype=np.int64)
-    find_near_fingers(q_old, q_old, contact, near)
+    find_near_fingers(q_old, q_old, contact, near, _scratch(contact))
     force = np.zeros((disc.n_nodes, disc.stride))
     band = np.zeros((disc.n_dofs, disc.band_width + 1))
     finger_contact_rod(0, q_old, q_old, q_old, dt, contact, near, True, force, band, _scratch(contact))

@@ -6,6 +6,7 @@ import pytest
 from soft_gripper_env.physics.kernels.linalg import (
     factor_banded_symmetric,
     solve_banded_symmetric_rod,
+    solve_dense,
     solve_factored,
     solve_factored_six_columns,
 )
@@ -135,3 +136,32 @@ def test_eliminate_rods_matches_the_dense_schur_complement(stride, held):
     np.testing.assert_allclose(block[0], coupling.T @ product - product_free.T @ expected_x, rtol=1e-10,
                                atol=1e-10)
     np.testing.assert_allclose(rhs[0], product_free.T @ expected_x0, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("n", [1, 2, 6])
+def test_dense_solve_solves_with_row_swaps(n):
+    """A·x = b for random systems whose first pivots are zero or small, so that rows must be swapped, against the
+    residual and NumPy's LAPACK solve."""
+    rng = np.random.default_rng(n)
+    for _ in range(20):
+        a = rng.normal(size=(n, n))
+        if n > 1:
+            a[0, 0] = 0.0  # a zero first pivot: only a row swap gets past it
+            a[1, 1] *= 1e-9
+        b = rng.normal(size=n)
+        x = b.copy()
+        assert solve_dense(a.copy(), x)
+        scale = np.abs(a).sum(axis=1) * np.abs(x).max()
+        assert np.all(np.abs(a @ x - b) <= 1e-13 * scale)
+        np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=1e-9, atol=1e-12)
+
+
+def test_dense_solve_refuses_singular_and_non_finite_systems():
+    """A singular matrix (a repeated row), a NaN in the matrix, an infinite right-hand side: False, as a failed
+    Newton step of the body."""
+    singular = np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]])
+    assert not solve_dense(singular.copy(), np.ones(3))
+    broken = np.eye(3)
+    broken[1, 2] = np.nan
+    assert not solve_dense(broken, np.ones(3))
+    assert not solve_dense(np.eye(3), np.array([1.0, np.inf, 0.0]))

@@ -44,6 +44,7 @@ import numpy as np
 from numba import njit
 
 from .contact import STICK_SPEED
+from .local import local_array
 
 
 class BodyArrays(NamedTuple):
@@ -148,16 +149,17 @@ def _palm_contact(b, body, c, velocity, omega, orientation, vertical_mass, dt, l
     if stiffness == 0.0:
         return
     radius = body.radius[b]
-    top_end = np.empty(3)
+    top_end = local_array(3)
+    end = local_array(3)
     highest = -np.inf
     for segment in (body.segment_start, body.segment_end):
-        end = np.empty(3)
         for i in range(3):
             end[i] = c[b, i] + orientation[i, 0] * segment[b, 0] + orientation[i, 1] * segment[b, 1] \
                 + orientation[i, 2] * segment[b, 2]
         if end[2] > highest:
             highest = end[2]
-            top_end[:] = end
+            for i in range(3):
+                top_end[i] = end[i]
     outside = max(math.hypot(top_end[0], top_end[1]) - palm_radius, 0.0)  # past the disc's rim
     cap = math.sqrt(max(radius * radius - outside * outside, 0.0))
     overlap = top_end[2] + cap
@@ -170,21 +172,24 @@ def _palm_contact(b, body, c, velocity, omega, orientation, vertical_mass, dt, l
     if push <= 0.0:  # separating faster than the overlap pushes: no pull
         return
     d_push = stiffness + critical * ramp / dt + (critical * velocity[2] / depth if 0.0 < overlap < depth else 0.0)
-    arm = np.empty(3)  # from the centre to the body's point on the palm
+    arm = local_array(3)  # from the centre to the body's point on the palm
     for i in range(3):
         arm[i] = top_end[i] - c[b, i]
     arm[2] += cap
-    d_force = np.zeros((3, 6))  # ∂(force on the body)/∂(c, θ)
+    d_force = local_array((3, 6))  # ∂(force on the body)/∂(c, θ)
+    d_force[:, :] = 0.0
     d_force[2, 2] = -d_push
     mu = body.palm_friction
-    force = np.zeros(3)
+    force = local_array(3)
+    force[:] = 0.0
     force[2] = -push
     if mu > 0.0:
-        slip = np.empty(2)  # u + ω × a, horizontal
+        slip = local_array(2)  # u + ω × a, horizontal
         slip[0] = velocity[0] + omega[1] * arm[2] - omega[2] * arm[1]
         slip[1] = velocity[1] + omega[2] * arm[0] - omega[0] * arm[2]
         norm = math.sqrt(slip[0] ** 2 + slip[1] ** 2 + STICK_SPEED**2)
-        d_slip = np.zeros((2, 6))  # ∂slip/∂(c, θ): u = (c − c_old)/Δt, ω = θ/Δt
+        d_slip = local_array((2, 6))  # ∂slip/∂(c, θ): u = (c − c_old)/Δt, ω = θ/Δt
+        d_slip[:, :] = 0.0
         d_slip[0, 0] = d_slip[1, 1] = 1.0 / dt
         d_slip[0, 4], d_slip[0, 5] = arm[2] / dt, -arm[1] / dt
         d_slip[1, 5], d_slip[1, 3] = arm[0] / dt, -arm[2] / dt
@@ -240,13 +245,14 @@ def body_residual(b, body, motion, orientation, dt, residual, matrix):
     c_old, u_old, orientation_old, w_old = motion.old
     inertia, weight, normal_drag, isotropic_drag, axis_body = body.inertia, body.weight, body.normal_drag, \
         body.isotropic_drag, body.axis
-    mass = np.empty((3, 3))
+    mass = local_array((3, 3))
     _translational_mass(b, body, orientation_old, mass)  # with the start-of-step orientation, as the rods' added mass
-    u = np.empty(3)
-    w = np.empty(3)
-    axis = np.empty(3)
-    part = np.empty(3)
-    force = np.zeros(3)
+    u = local_array(3)
+    w = local_array(3)
+    axis = local_array(3)
+    part = local_array(3)
+    force = local_array(3)
+    force[:] = 0.0
     force[2] = -weight[b]
     matrix[:, :] = 0.0
     for i in range(3):
@@ -270,8 +276,9 @@ def body_residual(b, body, motion, orientation, dt, residual, matrix):
             for j in range(3):
                 projector = (1.0 if i == j else 0.0) - (axis[i] * axis[j] if normal_only else 0.0)
                 matrix[i, j] += coefficient / dt * (speed * projector + part[i] * part[j] / safe)
-    palm = np.zeros(6)
-    omega = np.empty(3)
+    palm = local_array(6)
+    palm[:] = 0.0
+    omega = local_array(3)
     for i in range(3):
         omega[i] = theta[b, i] / dt
     _palm_contact(b, body, c, u, omega, orientation, mass[2, 2], dt, palm, matrix)
@@ -310,8 +317,8 @@ def _water_torque(b, body, theta, axis, dt, residual, matrix):
     and Jacobian by θ: −(8π·η·R³ + s·√|ω|)·ω on the sphere (or end caps), and −t·|ω⊥|·ω⊥ on a capsule's cylinder
     turning across its axis (``axis`` (3,), world frame)."""
     damping, spin, tumble = body.spin_damping[b], body.spin_drag[b], body.tumble_drag[b]
-    omega = np.empty(3)
-    across = np.empty(3)
+    omega = local_array(3)
+    across = local_array(3)
     for i in range(3):
         omega[i] = theta[i] / dt
     along = omega[0] * axis[0] + omega[1] * axis[1] + omega[2] * axis[2]
@@ -344,7 +351,8 @@ def _rotation_exp(theta, out):
     else:
         a = math.sin(angle) / angle
         b = (1.0 - math.cos(angle)) / angle**2
-    k = np.zeros((3, 3))
+    k = local_array((3, 3))
+    k[0, 0], k[1, 1], k[2, 2] = 0.0, 0.0, 0.0
     k[0, 1], k[0, 2], k[1, 2] = -theta[2], theta[1], -theta[0]
     k[1, 0], k[2, 0], k[2, 1] = theta[2], -theta[1], theta[0]
     for i in range(3):
@@ -371,25 +379,28 @@ def admissible_rotation(basis, theta):
     forbids would otherwise keep the predictor's Δt·ω_old step after step: a body that spun before planar fingers
     in two planes caught it would turn on at that rate for ever, carrying its holds (and the fingertips on them)
     around with it. Locking the rotation is the same inelastic impact that stick contact is for translation."""
-    projected = np.zeros(3)
+    projected = local_array(3)
+    projected[:] = 0.0
     for k in range(6):
         along = 0.0
         for i in range(3):
             along += basis[3 + i, k] * theta[i]
         for i in range(3):
             projected[i] += along * basis[3 + i, k]
-    theta[:] = projected
+    for i in range(3):
+        theta[i] = projected[i]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def planar_body_basis(held, plane_normals):
-    """The motions a free body held by planar fingers may make, (B, 6, 6), padded with zero columns: any
+def planar_body_basis(held, plane_normals, basis):
+    """The motions a free body held by planar fingers may make, into ``basis`` (B, 6, 6), which it returns, padded
+    with zero columns: any
     translation; any rotation while no finger touches; while every touching finger's plane has the same normal,
     rotation about it; else none (a rotation about another axis would carry held points out of a plane the finger
     cannot leave). ``held`` (R, N) marks held nodes, ``plane_normals`` (F, 3) the fingers' planes."""
     n_fingers = plane_normals.shape[0]
     n_grippers = held.shape[0] // n_fingers
-    basis = np.zeros((n_grippers, 6, 6))
+    basis[:, :, :] = 0.0
     for b in range(n_grippers):
         for k in range(3):
             basis[b, k, k] = 1.0

@@ -23,6 +23,7 @@ from numba import njit
 
 from ..scene.objects import GraspedObject
 from .linalg import symmetric_band_entry
+from .local import local_array
 
 STICK_SPEED = 1e-3
 """The slip speed [m/s] below which a regularised friction (the palm's, and the fingers' on each other) grows in
@@ -79,10 +80,10 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
     n_rods, n_nodes, stride = q.shape
     dim = friction.shape[2]
     n_fingers = finger_directions.shape[0]
-    local = np.empty(dim)
-    nearest = np.empty(dim)
-    unit = np.empty(dim)
-    acting = np.empty(dim)
+    local = local_array(3)[:dim]
+    nearest = local_array(3)[:dim]
+    unit = local_array(3)[:dim]
+    acting = local_array(3)[:dim]
     for r in range(n_rods):
         start, end = starts[r], ends[r]
         for i in range(n_nodes):
@@ -112,16 +113,18 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def within_reach(starts, ends, radii, length):
-    """Which rods (R,) can touch an object given as they see it (segment ends (R, D), touching distances (R, N)):
-    the object must exist in the rod's frame (some distance > 0) and its segment lie within ``length`` plus the
-    largest distance of the palm, the rods' origin."""
+def within_reach(starts, ends, radii, length, reach):
+    """Which rods can touch an object given as they see it (segment ends (R, D), touching distances (R, N)), into
+    ``reach`` (R,) bool, which it returns: the object must exist in the rod's frame (some distance > 0) and its
+    segment lie within ``length`` plus the largest distance of the palm, the rods' origin."""
     n_rods, dim = starts.shape
-    reach = np.empty(n_rods, dtype=np.bool_)
-    palm = np.zeros(dim)
-    nearest = np.empty(dim)
+    palm = local_array(3)[:dim]
+    palm[:] = 0.0
+    nearest = local_array(3)[:dim]
     for r in range(n_rods):
-        largest = radii[r].max()
+        largest = radii[r, 0]
+        for i in range(1, radii.shape[1]):
+            largest = max(largest, radii[r, i])
         reach[r] = largest > 0.0 and distance_to_segment(palm, starts[r], ends[r], nearest) < length + largest
     return reach
 
@@ -144,21 +147,21 @@ def distance_to_segment(point, start, end, nearest):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def find_penetrations(positions, old_positions, view, held, first_free_node, tolerance, new_hold, hold_at):
+def find_penetrations(positions, old_positions, view, held, first_free_node, tolerance, new_hold, hold_at, found):
     """Marks in ``new_hold`` (R, N) every free node from ``first_free_node`` on of a searched rod that lies inside its
     object (``view``, :class:`ObjectView`: for node i of rod r, the points within ``radii[r, i]`` of the segment
     ``starts``–``ends``, so that the finger's surface, not its centre line, touches the object's) by more
     than ``tolerance`` [m], and writes where it is held into ``hold_at`` (R, N, D): the point where its path over the
     step, relative to the object, entered the surface. ``old_positions`` (R, N, D) are the nodes at the start of the
     step and ``view.shift`` (R, D) the object's displacement over it. A node already inside at the start is
-    projected radially instead. Returns the number found per rod."""
+    projected radially instead. Writes the number found per rod into ``found`` (R,) int, which it returns."""
     starts, ends, radii, searched, shifts = view
     n_rods, n_nodes, dim = positions.shape
-    found = np.zeros(n_rods, dtype=np.int64)
-    nearest = np.empty(dim)
-    point = np.empty(dim)
-    begin = np.empty(dim)
+    nearest = local_array(3)[:dim]
+    point = local_array(3)[:dim]
+    begin = local_array(3)[:dim]
     for r in range(n_rods):
+        found[r] = 0
         if not searched[r]:
             continue
         start, end = starts[r], ends[r]  # views taken once per rod: each costs reference counts
@@ -215,7 +218,7 @@ def onto_surface(point, start, end, radius, normal):
     """Moves ``point`` (D,) in place along the normal to the surface at ``radius`` from the segment start–end, and
     writes that outward unit normal into ``normal`` (D,); returns False (and leaves both) where the point lies on
     the segment itself (:func:`outward_normal`)."""
-    nearest = np.empty(point.size)
+    nearest = local_array(3)[:point.size]
     if not outward_normal(point, start, end, nearest, normal):
         return False
     for k in range(point.size):
@@ -236,7 +239,7 @@ def along_surface(friction, normal, out):
     for d in range(friction.size):
         out[d] = friction[d] - along * normal[d]
         tangential += out[d] ** 2
-    scale = np.sqrt(size / tangential) if tangential > 0.0 else 0.0
+    scale = math.sqrt(size / tangential) if tangential > 0.0 else 0.0
     for d in range(friction.size):
         out[d] *= scale
 
@@ -254,9 +257,10 @@ def tangent_basis(normal, basis):
     for k in range(1, 3):
         if abs(normal[k]) < abs(normal[least]):
             least = k
-    axis = np.zeros(3)
+    axis = local_array(3)
+    axis[:] = 0.0
     axis[least] = 1.0
-    first = np.empty(3)
+    first = local_array(3)
     first[0] = axis[1] * normal[2] - axis[2] * normal[1]
     first[1] = axis[2] * normal[0] - axis[0] * normal[2]
     first[2] = axis[0] * normal[1] - axis[1] * normal[0]
@@ -277,7 +281,7 @@ def rotate_node(band, first, basis):
     kd = kd1 - 1
     dim = basis.shape[0]
     last = first + dim
-    old = np.empty(dim)
+    old = local_array(3)[:dim]
     # A node couples to nodes at most two away, all within the band (kd = 3·S − 1), so no rotated entry falls
     # outside it.
     for j in range(max(0, first - kd), min(n, last + kd)):  # every other DOF the node's block couples to
@@ -300,7 +304,7 @@ def rotate_node(band, first, basis):
                 band[i, kd - i + j] = value
             else:
                 band[j, kd - j + i] = value
-    block = np.empty((dim, dim))
+    block = local_array((3, 3))[:dim, :dim]
     for a in range(dim):
         for m in range(dim):
             i, k = first + max(a, m), first + min(a, m)

@@ -196,12 +196,12 @@ def _finger_world(q_rod, axes, out):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def find_near_fingers(q_old, q_pred, contact, near):
-    """:func:`near_fingers_of_gripper` for every gripper."""
+def find_near_fingers(q_old, q_pred, contact, near, scratch):
+    """:func:`near_fingers_of_gripper` for every gripper, with the work buffer ``scratch``
+    (:func:`finger_scratch`)."""
     if contact.stiffness == 0.0:
         return
     n_fingers = contact.eligible.shape[0]
-    scratch = finger_scratch(n_fingers, contact.eligible.shape[1])
     for first_rod in range(0, q_old.shape[0], n_fingers):
         near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near, scratch)
 

@@ -1,4 +1,5 @@
-"""The one linear solve of the simulator: many small symmetric banded systems, one per rod.
+"""The simulator's linear solves: many small symmetric banded systems, one per rod, and the small dense system of
+a free body's step (:func:`solve_dense`).
 
 The GPU back end (:mod:`..solvers.gpu`) compiles these same functions for the device.
 Band storage is row-major: ``band[r, i, kd − (i − j)]`` holds A[i, j] of rod r for i − kd ≤ j ≤ i, so row i of the
@@ -207,4 +208,41 @@ def solve_banded_symmetric_rod(a, x, free):
         x[:] = np.nan
         return False
     solve_factored(a, x, free, 0)
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def solve_dense(a, x):
+    """Solves A·x = b in place by Gaussian elimination with partial pivoting (rows swapped to the largest pivot of
+    each column): ``x`` (n,) holds b on entry and the solution on return; ``a`` (n, n) is overwritten. Returns False,
+    leaving ``x`` unsolved, where a pivot is zero or an entry is not finite. For the few unknowns of a free body's
+    Newton step; the same code on the CPU and the GPU."""
+    n = x.shape[0]
+    for i in range(n):
+        if not math.isfinite(x[i]):
+            return False
+        for j in range(n):
+            if not math.isfinite(a[i, j]):
+                return False
+    for k in range(n):
+        pivot_row = k
+        for i in range(k + 1, n):
+            if abs(a[i, k]) > abs(a[pivot_row, k]):
+                pivot_row = i
+        if a[pivot_row, k] == 0.0:
+            return False
+        if pivot_row != k:
+            for j in range(k, n):
+                a[k, j], a[pivot_row, j] = a[pivot_row, j], a[k, j]
+            x[k], x[pivot_row] = x[pivot_row], x[k]
+        for i in range(k + 1, n):
+            factor = a[i, k] / a[k, k]
+            for j in range(k + 1, n):
+                a[i, j] -= factor * a[k, j]
+            x[i] -= factor * x[k]
+    for k in range(n - 1, -1, -1):
+        value = x[k]
+        for j in range(k + 1, n):
+            value -= a[k, j] * x[j]
+        x[k] = value / a[k, k]
     return True

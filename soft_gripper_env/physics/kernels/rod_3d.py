@@ -389,12 +389,11 @@ def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stre
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def rod3d_update_frames(q, tangent_old, director_old, ref_twist_old, tangent, director, ref_twist):
-    """Frames at the end of a step: writes ``tangent``, ``director`` (R, N − 1, 3) and ``ref_twist`` (R, N)."""
+def rod3d_update_frames(q, tangent_old, director_old, ref_twist_old, tangent, director, ref_twist, scratch):
+    """Frames at the end of a step: writes ``tangent``, ``director`` (R, N − 1, 3) and ``ref_twist`` (R, N);
+    ``scratch`` is the 3-D energy's work buffer (:func:`elastic_scratch`)."""
     n_rods, n_nodes = q.shape[0], q.shape[1]
-    m1 = np.empty((n_nodes - 1, 3))
-    m2 = np.empty((n_nodes - 1, 3))
-    lengths = np.empty(n_nodes - 1)
+    _, _, m1, m2, _, lengths, _, _, _ = elastic_views(scratch, n_nodes)
     for r in range(n_rods):
         rod_frames(q[r], tangent_old[r], director_old[r], ref_twist_old[r], tangent[r], director[r], ref_twist[r],
                    m1, m2, lengths)

@@ -25,6 +25,7 @@ offset in the body's frame, and a gripper whose contacts changed is solved again
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -34,9 +35,10 @@ from ..kernels.assembly import StepInputs, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, BodyState, body_in_rod_frames, planar_body_basis, turned
 from ..kernels.contact import ObjectView, find_penetrations, outward_normal, within_reach
 from ..kernels.finger_contact import find_near_fingers
+from ..kernels.local import local_array
 from ..scene.forces import ForceTerms
 from ..scene.objects import PENETRATION_TOLERANCE
-from .newton import BodyCoupling, Holds, SolverArrays, SolveResult, newton
+from .newton import BodyCoupling, Holds, NewtonWork, SolverArrays, SolveResult, new_work, newton
 
 
 class ContactGeometry(NamedTuple):
@@ -83,9 +85,65 @@ class ContactChanges(NamedTuple):
     """Rods with any of these, (R,) bool."""
 
 
+class CorrectorWork(NamedTuple):
+    """The corrector's scratch for a batch of R rods of N nodes (n DOFs each) in B grippers: made once per call of a
+    CPU entry point (:func:`corrector_work`), the thread's own arrays for one gripper on the GPU. Nothing in it
+    carries from one step to the next."""
+
+    solve: np.ndarray
+    """The rods the next solve is for, (R,) bool."""
+    free: np.ndarray
+    """The DOFs Newton solves for, (R, n) bool."""
+    shift: np.ndarray
+    """A free body's displacement over the step in each rod's coordinates [m], (R, D)."""
+    adhesive: np.ndarray
+    """:attr:`ContactChanges.adhesive`, (R, N) bool."""
+    new_hold: np.ndarray
+    """:attr:`ContactChanges.new_hold`, (R, N) bool."""
+    slide: np.ndarray
+    """:attr:`ContactChanges.slide`, (R, N) bool."""
+    friction: np.ndarray
+    """:attr:`ContactChanges.friction` [N], (R, N, D)."""
+    stuck_again: np.ndarray
+    """:attr:`ContactChanges.stuck_again`, (R, N) bool."""
+    anchors: np.ndarray
+    """Where a free body's held nodes stuck last [m], (R, N, D)."""
+    reach: np.ndarray
+    """The rods that can touch the object, (R,) bool."""
+    found: np.ndarray
+    """New holds per rod, (R,) int."""
+    basis: np.ndarray
+    """A planar free body's admissible motions, (B, 6, 6) (empty for a fixed object or in 3-D)."""
+    newton: NewtonWork
+    """Newton's scratch for one gripper."""
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def corrector_work(q, dim, n_fingers, free_body, finger_contact):
+    """:class:`CorrectorWork` for the rods of ``q`` (R, N, S) with ``dim`` position coordinates and ``n_fingers``
+    rods per gripper, against a ``free_body`` or a fixed object, with or without ``finger_contact``."""
+    n_rods, n_nodes, stride = q.shape
+    flags = np.empty((5, n_rods, n_nodes), dtype=np.bool_)
+    points = np.empty((2, n_rods, n_nodes, dim))
+    n_bases = n_rods // n_fingers if free_body and dim == 2 else 0
+    return CorrectorWork(np.empty(n_rods, dtype=np.bool_), np.empty((n_rods, n_nodes * stride), dtype=np.bool_),
+                         np.zeros((n_rods, dim)), flags[0], flags[1], flags[2], points[0], flags[3], points[1],
+                         np.empty(n_rods, dtype=np.bool_), np.empty(n_rods, dtype=np.int64),
+                         np.empty((n_bases, 6, 6)), new_work(q, dim, n_fingers, free_body, True, finger_contact))
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result):
-    """The predictor–corrector for every gripper of a batch (see the module notes).
+    """The predictor–corrector for every gripper of a batch (see the module notes): :func:`correct_contacts` with
+    its scratch made here. Every bundle arrives as its fields in plain tuples (:func:`~.newton.plain`)."""
+    work = corrector_work(q, step[3].shape[1], solver[5], free_body is not None, step[5].size > 0)
+    correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result, work)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result, work):
+    """The predictor–corrector for every gripper of a batch (see the module notes), with the scratch ``work``
+    (:class:`CorrectorWork`).
 
     ``q`` (R, N, S) holds Newton's start and receives the solution; ``holds`` (:class:`~.newton.Holds`) the holds at
     the start of the step (``held`` (R, N), and for a free body their ``offsets``), updated in place; ``hold_at``
@@ -97,19 +155,19 @@ def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, f
     (:func:`~.newton.plain`) and is named again here; the loop is compiled apart for fixed and free objects.
     """
     step, rods, terms, solver = StepInputs(*step), named_rods(rods), ForceTerms(*terms), SolverArrays(*solver)
-    find_near_fingers(step.q_old, step.q_pred, rods.fingers, step.near)
+    find_near_fingers(step.q_old, step.q_pred, rods.fingers, step.near, work.newton.fingers)
     holds, geometry, result = Holds(*holds), ContactGeometry(*geometry), SolveResult(*result)
     if free_body is None:
-        _correct(q, step, rods, terms, solver, holds, hold_at, geometry, None, result)
+        _correct(q, step, rods, terms, solver, holds, hold_at, geometry, None, result, work)
     else:
         body, motion = free_body
         moving = (BodyArrays(*body), BodyMotion(motion[0], motion[1], motion[2], BodyState(*motion[3]), motion[4],
                                                     motion[5]))
-        _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result)
+        _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result, work)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result):
+def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result, work):
     """The corrector's loop; ``moving`` is None for a fixed object, else (bodies, their motion), and every branch
     on the body tests it, so that a fixed object's loop is compiled without them."""
     n_rods, n_nodes, _ = q.shape
@@ -117,34 +175,34 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
     n_fingers = solver.n_fingers
     held, sliding = holds.held, holds.sliding
     starts, ends, radii = geometry.starts, geometry.ends, geometry.radii
-    solve = np.ones(n_rods, dtype=np.bool_)
-    free = holds.measured.copy()
-    rotation = np.empty((3, 3))
-    shift = np.zeros((n_rods, dim))
-    new_hold = np.empty((n_rods, n_nodes), dtype=np.bool_)
-    adhesive = np.empty((n_rods, n_nodes), dtype=np.bool_)
-    changes = ContactChanges(adhesive, new_hold, hold_at, np.zeros((n_rods, n_nodes), dtype=np.bool_),
-                             np.zeros((n_rods, n_nodes, dim)), np.zeros((n_rods, n_nodes), dtype=np.bool_),
+    solve, free, shift, new_hold = work.solve, work.free, work.shift, work.new_hold
+    solve[:] = True
+    shift[:, :] = 0.0
+    rotation = local_array((3, 3))
+    work.slide[:, :] = False
+    work.friction[:, :, :] = 0.0
+    work.stuck_again[:, :] = False
+    changes = ContactChanges(work.adhesive, new_hold, hold_at, work.slide, work.friction, work.stuck_again,
                              result.changed)
     positions, old_positions = q[:, :, :dim], step.q_old[:, :, :dim]
-    anchor_points = np.empty((n_rods, n_nodes, dim))
     result.corrector[:] = 0
     result.residual[:, :] = 0.0
     for k in range(solver.max_corrector_iterations + n_nodes + 1):  # holds-only solves end by N
         contact_masks(solver.clamp_free, held, sliding, dim, free, holds.measured)
         if moving is not None:
-            basis = geometry.any_motion if dim == 3 else planar_body_basis(held, geometry.plane_normals)
+            basis = geometry.any_motion if dim == 3 else planar_body_basis(held, geometry.plane_normals, work.basis)
             newton(q, step, rods, terms, solver, free, holds, BodyCoupling(moving[0], moving[1], basis), solve,
-                   result)
+                   result, work.newton)
             _body_at_solution(step, solver, holds, geometry, moving[0], moving[1], rotation, shift)
         else:  # a fixed object's stuck nodes stay where they were held; solved from the last solution, warm
             _hold_in_place(positions, held, sliding, hold_at, solve)
-            newton(q, step, rods, terms, solver, free, holds, None, solve, result)
-        view = ObjectView(starts, ends, radii, within_reach(starts, ends, radii, solver.finger_length), shift)
+            newton(q, step, rods, terms, solver, free, holds, None, solve, result, work.newton)
+        view = ObjectView(starts, ends, radii, within_reach(starts, ends, radii, solver.finger_length, work.reach),
+                          shift)
         within_budget = k < solver.max_corrector_iterations
-        anchors = hold_at if moving is None else _anchors(holds, moving[1], n_fingers, anchor_points)
+        anchors = hold_at if moving is None else _anchors(holds, moving[1], n_fingers, work.anchors)
         contact_changes(positions, old_positions, anchors, result.residual, holds, view, geometry.friction, solver,
-                        within_budget, k < solver.friction_passes, changes)
+                        within_budget, k < solver.friction_passes, changes, work.found)
         if not corrector_continues(within_budget, new_hold, result.changed, solve):
             break
         if moving is not None:
@@ -154,7 +212,8 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
             if solve[r]:
                 result.corrector[r] += 1
     if moving is not None:  # a sliding node stops where it is, on the body, when the step ends
-        _body_frame_offsets(np.zeros_like(held), sliding, positions, holds, moving[1], n_fingers)
+        new_hold[:, :] = False  # (no longer read: no new holds, so only the sliding nodes' offsets are set)
+        _body_frame_offsets(new_hold, sliding, positions, holds, moving[1], n_fingers)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -236,7 +295,7 @@ fraction since the solve (plus Newton's force tolerance)."""
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def contact_changes(positions, old_positions, anchors, residual, holds, view, friction, solver, within_budget,
-                    settle_friction, changes):
+                    settle_friction, changes, found):
     """The corrector's test after a solve, for rods whose nodes are at ``positions`` (R, N, D) and whose residual
     (R, n) holds the reactions on held DOFs, against the object as each rod sees it (``view``,
     :class:`~..kernels.contact.ObjectView`), with Coulomb friction ``friction`` μ (R,) (:class:`ContactChanges`).
@@ -254,6 +313,8 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
       Only within the budget (``within_budget``);
     - ``changed``: rods with any of these, or, while ``settle_friction``, whose friction moved by more than
       :data:`FRICTION_TOLERANCE` (:attr:`~..scene.objects.ContactSettings.friction_passes`).
+
+    ``found`` (R,) int is scratch.
     """
     # the bundles' members taken out once: read in the branches below, each would cost reference counts
     adhesive, new_hold, changed = changes.adhesive, changes.new_hold, changes.changed
@@ -265,12 +326,12 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
     force_tolerance = solver.force_tolerance
     new_hold[:, :] = False
     stuck_again[:, :] = False
-    found = find_penetrations(positions, old_positions, view, held, solver.first_free_node, PENETRATION_TOLERANCE,
-                              new_hold, hold_at)
-    nearest = np.empty(dim)
-    normal = np.empty(dim)
-    reaction = np.empty(dim)
-    slip = np.empty(dim)
+    find_penetrations(positions, old_positions, view, held, solver.first_free_node, PENETRATION_TOLERANCE, new_hold,
+                      hold_at, found)
+    nearest = local_array(3)[:dim]
+    normal = local_array(3)[:dim]
+    reaction = local_array(3)[:dim]
+    slip = local_array(3)[:dim]
     for r in range(n_rods):
         changed[r] = found[r] > 0
         mu = friction[r]
@@ -302,7 +363,7 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
                 tangential = 0.0
                 for d in range(dim):
                     tangential += (reaction[d] - normal_reaction * normal[d]) ** 2
-                tangential = np.sqrt(tangential)
+                tangential = math.sqrt(tangential)
                 if tangential > limit + force_tolerance:
                     slide[r, i] = True
                     changed[r] = True
@@ -319,7 +380,7 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
                 slip[d] -= along * normal[d]
                 size += slip[d] ** 2
                 against += slip[d] * old_friction[r, i, d]
-            size = np.sqrt(size)
+            size = math.sqrt(size)
             if against > 0.0:  # its friction no longer opposes its motion: it has stopped and turned back
                 stuck_again[r, i] = True
                 changed[r] = True
@@ -330,7 +391,7 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
             old_size = 0.0
             for d in range(dim):
                 old_size += old_friction[r, i, d] ** 2
-            old_size = np.sqrt(old_size)
+            old_size = math.sqrt(old_size)
             moved = 0.0
             for d in range(dim):  # against the motion; a node that did not move keeps its friction's direction
                 if size > 0.0:
@@ -340,7 +401,7 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
                 else:
                     new_friction[r, i, d] = 0.0
                 moved += (new_friction[r, i, d] - old_friction[r, i, d]) ** 2
-            if settle_friction and np.sqrt(moved) > FRICTION_TOLERANCE * limit + force_tolerance:
+            if settle_friction and math.sqrt(moved) > FRICTION_TOLERANCE * limit + force_tolerance:
                 changed[r] = True
 
 
@@ -389,5 +450,6 @@ def contact_masks(clamp_free, held, sliding, dim, free, measured):
                     measured[r, stride * i + d] = False
 
 
-__all__ = ["ContactGeometry", "FRICTION_TOLERANCE", "solve_with_contact", "contact_changes", "corrector_continues",
+__all__ = ["ContactGeometry", "ContactChanges", "CorrectorWork", "FRICTION_TOLERANCE", "corrector_work",
+           "solve_with_contact", "correct_contacts", "contact_changes", "corrector_continues",
            "update_holds", "contact_masks"]

@@ -41,6 +41,7 @@ from numba.core import types
 from ..kernels.assembly import N_DESIGN_FIELDS, StepInputs, named_rods
 from ..kernels.finger_contact import finger_scratch_size
 from ..kernels.forces import project_water
+from ..kernels.local import local_array
 from ..kernels.rod_3d import elastic_scratch_size, elastic_views, rod_frames
 from ..scene.forces import ForceTerms
 from .newton import NewtonWork, SolverArrays, SolveResult, step_gripper_rods
@@ -84,9 +85,52 @@ def import_cuda():
         np.row_stack = np.vstack
     try:
         cuda = importlib.import_module("numba.cuda")
-        return cuda
     except ImportError as error:
         raise GpuUnavailable(f"numba.cuda cannot be imported ({error}): {INSTALL_HINT}") from error
+    if not simulated(cuda):
+        _register_local_array()
+    return cuda
+
+
+_registered = False
+
+
+def _register_local_array() -> None:
+    """Teaches numba-cuda :func:`~..kernels.local.local_array` once: on the GPU its call is the thread's own array
+    of that constant shape, as ``cuda.local.array`` makes it (the CPU's ``np.empty`` needs a heap)."""
+    global _registered
+    if _registered:
+        return
+    from numba.cuda import cudadecl, cudaimpl
+    from numba.cuda.cudadrv import nvvm
+    from numba.cuda.typing.templates import AbstractTemplate, signature
+
+    def constant_shape(shape):
+        if isinstance(shape, types.IntegerLiteral):
+            return (shape.literal_value,)
+        if isinstance(shape, types.BaseTuple) and all(isinstance(s, types.IntegerLiteral) for s in shape):
+            return tuple(s.literal_value for s in shape)
+        return None
+
+    @cudadecl.register
+    class LocalArray(AbstractTemplate):
+        key = local_array
+
+        def generic(self, args, kws):
+            if len(args) == 1 and not kws and (shape := constant_shape(args[0])) is not None:
+                return signature(types.Array(types.float64, len(shape), "C"), args[0])
+            return None
+
+    cudadecl.register_global(local_array, types.Function(LocalArray))
+
+    @cudaimpl.lower(local_array, types.IntegerLiteral)
+    @cudaimpl.lower(local_array, types.BaseTuple)
+    def lower_local_array(context, builder, sig, args):
+        return cudaimpl._generic_array(context, builder, shape=constant_shape(sig.args[0]), dtype=types.float64,
+                                       symbol_name="_cudapy_lmem", addrspace=nvvm.ADDRSPACE_LOCAL,
+                                       can_dynsized=False)
+
+    _registered = True
 
 
 def cuda_module():
@@ -207,11 +251,11 @@ def _build_rods_kernel(shape: RodsKernelShape):
         for f in range(F):
             kappa[f] = curvature[first + f]
             copy_rod(state, first + f, start, f, three_d)
-        # Newton's results and work arrays (newton._new_work's, sized for one gripper)
+        # Newton's results and work arrays (newton.new_work's, sized for one gripper)
         flags = cuda.local.array((5, F), boolean)  # converged, changed, every rod, active, rubbing
         counts = cuda.local.array((2, F), int64)
         ratios = cuda.local.array((3, F), float64)
-        for f in range(F):  # as newton._new_work's zeros: a rod rubs another only where the search says so
+        for f in range(F):  # as newton.new_work's zeros: a rod rubs another only where the search says so
             for row in range(5):
                 flags[row, f] = False
             counts[0, f] = 0

@@ -24,6 +24,7 @@ One iteration is the same named steps in both cases (:func:`_rod_residual`, :fun
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -33,7 +34,14 @@ from ..kernels.assembly import StepInputs, assemble_rod, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
 from ..kernels.contact import along_surface, onto_surface, rotate_node, tangent_basis
 from ..kernels.finger_contact import any_near, finger_scratch, near_fingers_of_gripper
-from ..kernels.linalg import factor_banded_symmetric, solve_factored, solve_factored_six_columns, symmetric_band_entry
+from ..kernels.linalg import (
+    factor_banded_symmetric,
+    solve_dense,
+    solve_factored,
+    solve_factored_six_columns,
+    symmetric_band_entry,
+)
+from ..kernels.local import local_array
 from ..kernels.rod_3d import elastic_scratch
 from ..scene.forces import ForceTerms
 
@@ -239,7 +247,7 @@ def _nonzero_rows(s):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def newton(q, step, rods, terms, solver, free, holds, coupling, solve, result):
+def newton(q, step, rods, terms, solver, free, holds, coupling, solve, result, work):
     """Newton's method for the rods where ``solve`` (R,) is True, each gripper at once (see the module notes).
 
     ``q`` (R, N, S) holds the start and receives the solution; only DOFs where ``free`` (R, n) is True move. With the
@@ -250,17 +258,16 @@ def newton(q, step, rods, terms, solver, free, holds, coupling, solve, result):
     contacts (:class:`Holds`; None for rods on their own), ``coupling`` a :class:`BodyCoupling` with free bodies,
     else None. A sliding node's DOFs are solved for in its surface's frame (normal fixed, tangents free; ``free``
     then reads in that frame). Writes every solved rod's ``converged``, ``iterations``, ``ratio`` and ``residual``
-    into ``result`` (:class:`SolveResult`). A rod whose factorisation fails stops with ratio inf.
+    into ``result`` (:class:`SolveResult`). A rod whose factorisation fails stops with ratio inf. ``work`` is one
+    gripper's scratch (:class:`NewtonWork`, :func:`new_work`), reused from gripper to gripper and call to call.
     """
-    work = _new_work(q, step.water.shape[1], solver.n_fingers, coupling is not None, holds is not None,
-                     step.near.size > 0)
     for b in range(q.shape[0] // solver.n_fingers):
         _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve, result, work)
 
 
 class NewtonWork(NamedTuple):
-    """Scratch of one gripper's solve: allocated once per call of :func:`newton` or :func:`advance_rods` on the CPU
-    (:func:`_new_work`), the thread's own arrays on the GPU (:mod:`.gpu`)."""
+    """Scratch of one gripper's solve: allocated once per call of a CPU entry point (:func:`new_work`), the thread's
+    own arrays on the GPU (:mod:`.gpu`). Nothing in it carries from one solve to the next."""
 
     force: np.ndarray
     velocity: np.ndarray
@@ -294,7 +301,7 @@ class NewtonWork(NamedTuple):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _new_work(q, dim, n_fingers, coupled, contact, fingers):
+def new_work(q, dim, n_fingers, coupled, contact, fingers):
     """The work arrays; those only a body's solve (``coupled``), a contact's (``contact``) or the line search of
     fingers touching each other (``fingers``) uses are empty, and shared, otherwise: every allocation counts in the
     rods' own step, a few tens of microseconds."""
@@ -499,12 +506,12 @@ def _place_held_nodes(b, r, q, holds, coupling, rod_coupling, normals, body_resi
     dim = projection.shape[0]
     orientation = motion.orientation[b]
     c = motion.position
-    a = np.empty(3)
-    world = np.empty(3)
-    cross = np.empty((3, 3))
-    motion_rows = np.empty((dim, 6))  # P·[I, −[a]×] of one node
+    a = local_array(3)
+    world = local_array(3)
+    cross = local_array((3, 3))
+    motion_rows = local_array((3, 6))[:dim]  # P·[I, −[a]×] of one node
     rod_coupling[:, :] = 0.0
-    start, end = np.empty(dim), np.empty(dim)  # the body's segment as the rod sees it now
+    start, end = local_array(3)[:dim], local_array(3)[:dim]  # the body's segment as the rod sees it now
     for d in range(dim):
         start[d] = end[d] = 0.0
         for k in range(3):
@@ -517,13 +524,14 @@ def _place_held_nodes(b, r, q, holds, coupling, rod_coupling, normals, body_resi
     across = 0.0  # a planar finger: the centre's distance from its plane, whose normal is (−d_y, d_x, 0)
     if dim == 2:
         across = -projection[0, 1] * c[b, 0] + projection[0, 0] * c[b, 1]
-    scratch_normal = np.empty(dim)
+    scratch_normal = local_array(3)[:dim]
+    friction = local_array(3)[:dim]
     for i in range(q.shape[1]):
         if not holds.held[r, i]:
             continue
         sliding = holds.sliding[r, i]
         reach = body.radius[b] + holds.finger_radius[i]  # where the node touches the body now (the planar section's)
-        radius = reach if dim == 3 else np.sqrt(max(reach * reach - across * across, 0.0))
+        radius = reach if dim == 3 else math.sqrt(max(reach * reach - across * across, 0.0))
         if sliding:  # onto the surface, then its world point relative to the centre
             onto_surface(q[r, i, :dim], start, end, radius, normals[i])
             for k in range(3):
@@ -552,7 +560,6 @@ def _place_held_nodes(b, r, q, holds, coupling, rod_coupling, normals, body_resi
             if dim == 2:  # a held point the body carries out of the finger's plane: back onto the section
                 onto_surface(q[r, i, :dim], start, end, radius, scratch_normal)
             continue
-        friction = np.empty(dim)
         along_surface(holds.friction[r, i], normals[i], friction)
         for k in range(6):
             along_normal = 0.0
@@ -581,8 +588,8 @@ def _slide_rows(r, holds, normals, residual, right_hand_side, band, tolerance_in
     where the tangents are free and measured against the tolerance. Returns ``own`` and ``largest`` updated."""
     dim = holds.starts.shape[1]
     stride = residual.size // normals.shape[0]
-    friction = np.empty(dim)
-    rotated = np.empty(dim)
+    friction = local_array(3)[:dim]
+    rotated = local_array(3)[:dim]
     for i in range(normals.shape[0]):
         if not (holds.held[r, i] and holds.sliding[r, i]):
             continue
@@ -617,7 +624,7 @@ def _unrotate_steps(first_rod, holds, work):
     held, sliding = holds.held, holds.sliding
     dim = basis.shape[0]
     stride = x0.shape[1] // normals.shape[1]
-    value = np.empty(dim)
+    value = local_array(3)[:dim]
     columns = x_coupling.shape[2] if x_coupling.shape[0] > 0 else 0  # X only with a body
     for f in range(active.size):
         if not active[f]:
@@ -722,8 +729,8 @@ def _body_step(b, basis, work):
         for i in range(6):
             for j in range(6):
                 matrix[i, j] += work.block[f, i, j]
-    reduced = np.empty((6, 6))
-    reduced_rhs = np.empty(6)
+    reduced = local_array((6, 6))
+    solution = local_array(6)
     total = work.body_total  # Bᵀ·G from _body_residual_in_basis
     step = work.body_step
     for k in range(6):
@@ -735,16 +742,15 @@ def _body_step(b, basis, work):
         for f in range(work.rhs.shape[0]):
             for i in range(6):
                 value -= basis[i, k] * work.rhs[f, i]  # rhs = (A·S)ᵀ·x0 with x0 = −A⁻¹·G
-        reduced_rhs[k] = value
+        solution[k] = value
         for m in range(6):
             value = 0.0
             for i in range(6):
                 for j in range(6):
                     value += basis[i, k] * matrix[i, j] * basis[j, m]
             reduced[k, m] = value + (1.0 if k == m and not used else 0.0)
-    if not (np.isfinite(reduced).all() and np.isfinite(reduced_rhs).all()) or np.linalg.det(reduced) == 0.0:
-        return False  # a diverged iterate, or a singular system (the solve would raise): the solve fails instead
-    solution = np.linalg.solve(reduced, reduced_rhs)
+    if not solve_dense(reduced, solution):
+        return False  # a diverged iterate, or a singular system: the solve fails instead
     for i in range(6):
         step[i] = 0.0
         for k in range(6):
@@ -819,7 +825,7 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
                          flags[1])
     every_rod = flags[2]
     every_rod[:] = True
-    work = _new_work(q, dim, solver.n_fingers, False, False, step.near.size > 0)
+    work = new_work(q, dim, solver.n_fingers, False, False, step.near.size > 0)
     for b in range(n_rods // solver.n_fingers):  # gripper by gripper, while its rods' arrays are in cache
         step_gripper_rods(b, velocity_old, acceleration_old, step, rods, terms, solver, midpoint, q, velocity,
                           acceleration, every_rod, result, work)
@@ -832,7 +838,7 @@ def step_gripper_rods(b, velocity_old, acceleration_old, step, rods, terms, solv
     """Gripper b's rods, on their own, through one backward-Euler step from ``step.q_old`` (:func:`advance_rods`,
     whose arguments these are, named): :func:`predict` into ``step.q_pred`` and ``q``, the fingers near each other,
     Newton's method (:func:`newton`'s loop, results into ``result``) and :func:`finish` (with ``midpoint``,
-    :func:`midpoint_end` too). Allocates nothing (``work`` from :func:`_new_work`, or a GPU thread's own arrays)."""
+    :func:`midpoint_end` too). Allocates nothing (``work`` from :func:`new_work`, or a GPU thread's own arrays)."""
     n_fingers = solver.n_fingers
     q_old, dt = step.q_old, step.dt
     for r in range(b * n_fingers, (b + 1) * n_fingers):
@@ -910,6 +916,6 @@ def per_gripper(converged, iterations, ratio, n_fingers):
     return all_converged, most, largest
 
 
-__all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "BodyCoupling", "MAX_STEP_HALVINGS",
-           "NewtonWork", "eliminate_rods", "newton", "advance_rods", "step_gripper_rods", "predict", "finish",
+__all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "BodyCoupling", "MAX_STEP_HALVINGS", "NewtonWork",
+           "new_work", "eliminate_rods", "newton", "advance_rods", "step_gripper_rods", "predict", "finish",
            "midpoint_end", "per_gripper"]

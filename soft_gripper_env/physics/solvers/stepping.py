@@ -17,6 +17,7 @@ what else shares its batch.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -25,7 +26,7 @@ from numba import njit
 from ..kernels.contact import contact_reactions
 from ..kernels.forces import project_water
 from ..kernels.rod_3d import rod3d_update_frames
-from .corrector import solve_with_contact
+from .corrector import CorrectorWork, correct_contacts, corrector_work
 from .newton import finish, predict
 
 
@@ -91,6 +92,77 @@ class Interval(NamedTuple):
     it is taken as it is when Newton converged (the corrector's budget spent) and fails otherwise."""
 
 
+class StepWork(NamedTuple):
+    """The scratch of :func:`step_batch` for a batch of R rods of N nodes (n DOFs each, D position coordinates) in B
+    grippers: made once per call of :func:`take_steps` on the CPU (:func:`step_work`), the thread's own arrays for
+    its gripper on the GPU (:mod:`.gpu`). Nothing in it carries from one step to the next."""
+
+    q_pred: np.ndarray
+    """The predictor [m, rad], (R, N, S)."""
+    new: WorkingState
+    """The step's end, before it is committed."""
+    water: np.ndarray
+    """The current as each rod sees it [m/s], (R, D)."""
+    water_acceleration: np.ndarray
+    """The current's mean acceleration over the step at each gripper [m/s²], (B, 3)."""
+    near: np.ndarray
+    """The fingers near each other (:attr:`~..kernels.assembly.StepInputs.near`), (R, N, F) int; empty without
+    finger contact."""
+    sliding: np.ndarray
+    """(R, N) bool."""
+    friction: np.ndarray
+    """[N], (R, N, D)."""
+    measured: np.ndarray
+    """(R, n) bool."""
+    hold_at: np.ndarray
+    """[m], (R, N, D)."""
+    converged: np.ndarray
+    """(R,) bool."""
+    changed: np.ndarray
+    """(R,) bool."""
+    iterations: np.ndarray
+    """(R,) int."""
+    corrector: np.ndarray
+    """(R,) int."""
+    ratio: np.ndarray
+    """(R,)."""
+    residual: np.ndarray
+    """[N, N·m], (R, n)."""
+    reaction: np.ndarray
+    """The object's force on every node [N], (R, N, 3)."""
+    normal_reaction: np.ndarray
+    """[N], (R, N)."""
+    ok: np.ndarray
+    """(B,) bool."""
+    most: np.ndarray
+    """(B,) int."""
+    every: np.ndarray
+    """0 … B − 1, (B,) int."""
+    corrector_work: CorrectorWork
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def step_work(state, n_fingers, dim, finger_contact, free_body):
+    """:class:`StepWork` for the batch of ``state`` (:class:`WorkingState`) with ``n_fingers`` rods per gripper and
+    ``dim`` position coordinates, with or without ``finger_contact``, against a ``free_body`` or a fixed object."""
+    n_rods, n_nodes, stride = state.q.shape
+    n_grippers = n_rods // n_fingers
+    new = WorkingState(np.empty_like(state.q), np.empty_like(state.q), np.empty_like(state.q),
+                       np.empty_like(state.held), np.empty_like(state.hold_offset), np.empty_like(state.tangent),
+                       np.empty_like(state.director), np.empty_like(state.reference_twist),
+                       np.empty_like(state.body_position), np.empty_like(state.body_velocity),
+                       np.empty_like(state.body_orientation), np.empty_like(state.body_angular_velocity))
+    return StepWork(np.empty_like(state.q), new, np.empty((n_rods, dim)), np.empty((n_grippers, 3)),
+                    np.empty((n_rods, n_nodes, n_fingers) if finger_contact else (0, 0, 0), dtype=np.int64),
+                    np.empty((n_rods, n_nodes), dtype=np.bool_), np.empty((n_rods, n_nodes, dim)),
+                    np.empty((n_rods, n_nodes * stride), dtype=np.bool_), np.empty((n_rods, n_nodes, dim)),
+                    np.empty(n_rods, dtype=np.bool_), np.empty(n_rods, dtype=np.bool_),
+                    np.empty(n_rods, dtype=np.int64), np.empty(n_rods, dtype=np.int64), np.empty(n_rods),
+                    np.empty((n_rods, n_nodes * stride)), np.empty((n_rods, n_nodes, 3)), np.empty((n_rods, n_nodes)),
+                    np.empty(n_grippers, dtype=np.bool_), np.zeros(n_grippers, dtype=np.int64),
+                    np.arange(n_grippers), corrector_work(state.q, dim, n_fingers, free_body, finger_contact))
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, state, interval):
     """Takes a step of length ``dt`` [s] into the running grippers ``grippers`` (m,) of ``state``
@@ -99,6 +171,7 @@ def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, st
     (m·F, N, 3) [N] into ``interval`` (:class:`Interval`), ramps their κ̄ and advances their clocks. A running gripper
     that the step did not leave ok stops and fails; a ``pending`` one is left as it is."""
     n_fingers = state.q.shape[0] // interval.running.shape[0]
+    n_nodes, stride = state.q.shape[1], state.q.shape[2]
     for j in range(grippers.shape[0]):
         b = grippers[j]
         if not interval.running[b] or interval.pending[b]:  # stopped, or left for the adaptive path
@@ -109,16 +182,21 @@ def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, st
             continue
         for f in range(n_fingers):
             r, s = b * n_fingers + f, j * n_fingers + f  # the rod in state and in new
-            state.q[r] = new.q[s]
-            state.velocity[r] = new.velocity[s]
-            state.acceleration[r] = new.acceleration[s]
-            state.held[r] = new.held[s]
-            if state.hold_offset.shape[0] > 0:
-                state.hold_offset[r] = new.hold_offset[s]
-            if state.tangent.shape[0] > 0:
-                state.tangent[r] = new.tangent[s]
-                state.director[r] = new.director[s]
-                state.reference_twist[r] = new.reference_twist[s]
+            for i in range(n_nodes):  # element by element: the GPU build copies no array into another by slice
+                for k in range(stride):
+                    state.q[r, i, k] = new.q[s, i, k]
+                    state.velocity[r, i, k] = new.velocity[s, i, k]
+                    state.acceleration[r, i, k] = new.acceleration[s, i, k]
+                state.held[r, i] = new.held[s, i]
+                if state.hold_offset.shape[0] > 0:
+                    for k in range(3):
+                        state.hold_offset[r, i, k] = new.hold_offset[s, i, k]
+                if state.tangent.shape[0] > 0:
+                    state.reference_twist[r, i] = new.reference_twist[s, i]
+                    if i < n_nodes - 1:
+                        for k in range(3):
+                            state.tangent[r, i, k] = new.tangent[s, i, k]
+                            state.director[r, i, k] = new.director[s, i, k]
             for i in range(normal_reaction.shape[1]):
                 interval.normal_impulse[r, i] += max(normal_reaction[s, i], 0.0) * dt
                 for d in range(3):
@@ -126,66 +204,68 @@ def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, st
             ramped = interval.natural_curvature[r] + interval.curvature_rate[r] * dt
             interval.natural_curvature[r] = min(max(ramped, interval.curvature_low), interval.curvature_high)
         if state.body_position.shape[0] > 0:
-            state.body_position[b] = new.body_position[j]
-            state.body_velocity[b] = new.body_velocity[j]
-            state.body_orientation[b] = new.body_orientation[j]
-            state.body_angular_velocity[b] = new.body_angular_velocity[j]
+            for k in range(3):
+                state.body_position[b, k] = new.body_position[j, k]
+                state.body_velocity[b, k] = new.body_velocity[j, k]
+                state.body_angular_velocity[b, k] = new.body_angular_velocity[j, k]
+                for m in range(3):
+                    state.body_orientation[b, k, m] = new.body_orientation[j, k, m]
         interval.newton_iterations[b] += iterations[j]
         interval.clock[b] += dt
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body, interval):
+    """:func:`step_batch` with its scratch made here: the CPU's entry point."""
+    work = step_work(state, solver[5], geometry[0].shape[1], rods[5][0] > 0.0, body is not None)
+    return step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body,
+                      interval, work)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body, interval,
+               work):
     """Steps ``first`` … ``n_steps`` − 1 of length ``dt`` [s] of every running gripper, from and into ``state``
     (:class:`WorkingState`), with the current at every gripper at each step's start and end, ``gripper_water``
     (n_steps + 1, B, 3) [m/s]; ramps and sums into ``interval`` (:class:`Interval`). ``rods`` (with ``state``'s
     frames in 3-D), ``terms``, ``solver`` and ``geometry`` are the plain fields that
     :func:`~.corrector.solve_with_contact` takes, ``projection`` (R, D, 3) rod coordinates from world vectors;
-    ``body`` the free bodies' arrays, or None for a fixed object.
+    ``body`` the free bodies' arrays, or None for a fixed object; ``work`` the scratch (:class:`StepWork`).
     Returns the index of the step where it stopped: ``n_steps`` when it took them all; a step that some running
     grippers did not settle, which the others took and the ``pending`` ones (``interval.pending``) have still to take
-    on the adaptive path; or a step that no gripper runs to take."""
+    on the adaptive path; or a step that no gripper runs to take. The GPU runs this for one gripper per thread."""
     n_rods, n_nodes, stride = state.q.shape
     n_fingers = solver[5]
     n_grippers = n_rods // n_fingers
     dim = geometry[0].shape[1]
     planar = state.tangent.shape[0] == 0
     free_body = body is not None
-    q_pred = np.empty_like(state.q)
-    new = WorkingState(np.empty_like(state.q), np.empty_like(state.q), np.empty_like(state.q),
-                       np.empty_like(state.held), np.empty_like(state.hold_offset), np.empty_like(state.tangent),
-                       np.empty_like(state.director), np.empty_like(state.reference_twist),
-                       np.empty_like(state.body_position), np.empty_like(state.body_velocity),
-                       np.empty_like(state.body_orientation), np.empty_like(state.body_angular_velocity))
-    water = np.empty((n_rods, dim))
-    water_acceleration = np.empty((n_grippers, 3))
-    near = np.empty((n_rods, n_nodes, n_fingers) if rods[5][0] > 0.0 else (0, 0, 0), dtype=np.int64)
-    sliding = np.empty((n_rods, n_nodes), dtype=np.bool_)
-    friction = np.empty((n_rods, n_nodes, dim))
-    measured = np.empty((n_rods, n_nodes * stride), dtype=np.bool_)
-    hold_at = np.empty((n_rods, n_nodes, dim))
-    converged, changed = np.empty(n_rods, dtype=np.bool_), np.empty(n_rods, dtype=np.bool_)
-    iterations, corrector = np.empty(n_rods, dtype=np.int64), np.empty(n_rods, dtype=np.int64)
-    ratio, residual = np.empty(n_rods), np.empty((n_rods, n_nodes * stride))
-    reaction, normal_reaction = np.empty((n_rods, n_nodes, 3)), np.empty((n_rods, n_nodes))
-    ok = np.empty(n_grippers, dtype=np.bool_)
-    most = np.zeros(n_grippers, dtype=np.int64)
-    every = np.arange(n_grippers)
+    q_pred, new, water, water_acceleration, near = work.q_pred, work.new, work.water, work.water_acceleration, \
+        work.near
+    sliding, friction, measured, hold_at = work.sliding, work.friction, work.measured, work.hold_at
+    converged, changed, iterations, corrector = work.converged, work.changed, work.iterations, work.corrector
+    ratio, residual, reaction, normal_reaction = work.ratio, work.residual, work.reaction, work.normal_reaction
+    ok, most, every = work.ok, work.most, work.every
     interval.pending[:] = False
     for k in range(first, n_steps):
         if not interval.running.any():
             return k
         project_water(geometry[5], gripper_water[k], water)
         predict(state.q, state.velocity, state.acceleration, dt, q_pred, new.q)
-        new.held[:, :] = state.held
-        sliding[:, :] = False
-        friction[:, :, :] = 0.0
-        hold_at[:, :, :] = state.q[:, :, :dim]
+        for r in range(n_rods):  # element by element: the GPU build copies no array into another by slice
+            for i in range(n_nodes):
+                new.held[r, i] = state.held[r, i]
+                sliding[r, i] = False
+                for d in range(dim):
+                    friction[r, i, d] = 0.0
+                    hold_at[r, i, d] = state.q[r, i, d]
+                if free_body:
+                    for d in range(3):
+                        new.hold_offset[r, i, d] = state.hold_offset[r, i, d]
         changed[:] = False
         corrector[:] = 0
         step = (state.q, q_pred, interval.natural_curvature, water, dt, near)
         result = (converged, iterations, ratio, residual, corrector, changed)
-        new.hold_offset[:, :, :] = state.hold_offset  # (empty for a fixed object)
         holds = (new.held, new.hold_offset, projection, sliding, friction, measured, geometry[0], geometry[1],
                  geometry[2], geometry[3])
         if free_body:
@@ -197,9 +277,11 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
             old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
             motion = (new.body_position, new.body_angular_velocity, new.body_orientation, old, gripper_water[k],
                       water_acceleration)
-            solve_with_contact(new.q, step, rods, terms, solver, holds, hold_at, geometry, (body, motion), result)
+            correct_contacts(new.q, step, rods, terms, solver, holds, hold_at, geometry, (body, motion), result,
+                             work.corrector_work)
         else:
-            solve_with_contact(new.q, step, rods, terms, solver, holds, hold_at, geometry, None, result)
+            correct_contacts(new.q, step, rods, terms, solver, holds, hold_at, geometry, None, result,
+                             work.corrector_work)
         finish(new.q, state.q, state.velocity, dt, new.velocity, new.acceleration)
         if free_body:
             for b in range(n_grippers):
@@ -208,23 +290,26 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
                     new.body_angular_velocity[b, d] = new.body_angular_velocity[b, d] / dt
         if not planar:
             rod3d_update_frames(new.q, state.tangent, state.director, state.reference_twist, new.tangent,
-                                new.director, new.reference_twist)
+                                new.director, new.reference_twist, work.corrector_work.newton.elastic)
         any_pending = False
         for b in range(n_grippers):
-            all_converged, resolved = True, True
+            all_converged, resolved, finite = True, True, True
             most[b] = 0
             for r in range(b * n_fingers, (b + 1) * n_fingers):
                 all_converged = all_converged and converged[r]
                 resolved = resolved and not changed[r]
                 most[b] = max(most[b], iterations[r])
+                for i in range(n_nodes):
+                    for s in range(stride):
+                        finite = finite and math.isfinite(new.q[r, i, s]) and math.isfinite(new.velocity[r, i, s])
+            if free_body:
+                for d in range(3):
+                    finite = finite and math.isfinite(new.body_position[b, d]) \
+                        and math.isfinite(new.body_velocity[b, d])
             # as the adaptive path: a step not settled is halved, or without halvings kept if Newton converged
             interval.pending[b] = interval.running[b] and interval.halve and not (all_converged and resolved)
             any_pending = any_pending or interval.pending[b]
-            ok[b] = all_converged and not interval.pending[b] \
-                and np.isfinite(new.q[b * n_fingers:(b + 1) * n_fingers]).all() \
-                and np.isfinite(new.velocity[b * n_fingers:(b + 1) * n_fingers]).all()
-            if free_body:
-                ok[b] = ok[b] and np.isfinite(new.body_position[b]).all() and np.isfinite(new.body_velocity[b]).all()
+            ok[b] = all_converged and not interval.pending[b] and finite
         contact_reactions(new.q, residual, new.held, friction, geometry[0], geometry[1], geometry[5], reaction,
                           normal_reaction)
         commit_step(dt, every, ok, new, most, normal_reaction, reaction, state, interval)
@@ -233,4 +318,4 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
     return n_steps
 
 
-__all__ = ["WorkingState", "Interval", "commit_step", "take_steps"]
+__all__ = ["WorkingState", "Interval", "StepWork", "step_work", "commit_step", "take_steps", "step_batch"]
