@@ -207,7 +207,7 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
             break
         if moving is not None:
             _body_frame_offsets(new_hold, changes.stuck_again, hold_at, holds, moving[1], n_fingers)
-        update_holds(within_budget, holds, changes)
+        update_holds(within_budget, holds, changes, solve, n_fingers, moving is not None)
         for r in range(n_rods):
             if solve[r]:
                 result.corrector[r] += 1
@@ -420,11 +420,22 @@ def corrector_continues(within_budget, new_hold, changed, again):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def update_holds(within_budget, holds, changes):
+def update_holds(within_budget, holds, changes, again, n_fingers, whole_gripper):
     """The holds of the next solve, in place (:class:`ContactChanges`): new penetrations held (stuck), within the
-    budget adhesive holds released, and every hold stuck or sliding as the test found, with its friction."""
+    budget adhesive holds released, and every hold stuck or sliding as the test found, with its friction. Only for
+    the rods solved again, ``again`` (R,) bool, and with ``whole_gripper`` (a free body, solved with all its
+    gripper's rods) every rod of a gripper one of whose rods is: a rod that is not solved again keeps the holds its
+    solution was found with, so that the reactions it reports (its friction among them) are those of its own
+    solution, whatever the other grippers of its batch do."""
     held, sliding, adhesive, new_hold = holds.held, holds.sliding, changes.adhesive, changes.new_hold
     for r in range(held.shape[0]):
+        updated = again[r]
+        if whole_gripper:
+            first = r - r % n_fingers
+            for other in range(first, first + n_fingers):
+                updated = updated or again[other]
+        if not updated:
+            continue
         for i in range(held.shape[1]):
             held[r, i] = (held[r, i] and not (within_budget and adhesive[r, i])) or new_hold[r, i]
             sliding[r, i] = held[r, i] and not new_hold[r, i] and changes.slide[r, i]
