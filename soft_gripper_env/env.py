@@ -15,6 +15,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .grasp_task import OPTION_RANGES, GraspBatch, GraspTask, RewardWeights, check_options, task_episode
+from .physics import check_device
 
 DEFAULT_MAX_EPISODE_STEPS = GraspTask().max_episode_steps
 """Episode length of the registered environment: the default task's 4 s, 80 actions of 0.05 s."""
@@ -325,12 +326,17 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
     and steps them on a thread each. The compiled physics releases Python's lock, so the shards' physics runs on
     separate cores while one shard's Python bookkeeping overlaps the other's physics. Every env's results are those
     of one thread: a shard steps its envs exactly as the whole batch would.
+
+    ``device="cuda"`` steps every env's physics on an NVIDIA GPU, one CUDA thread per env (``pip install -e
+    ".[gpu]"``; :mod:`soft_gripper_env.physics.solvers.gpu`): each action's steps in one launch, the same results as
+    the CPU's to rounding. The task's reward, observations and infos are computed on the host from the state copied
+    back once per action, and returned as NumPy arrays.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": [], "render_fps": 20}
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int = DEFAULT_MAX_EPISODE_STEPS, num_threads: int = 1,
-                 **settings) -> None:
+                 device: str = "cpu", **settings) -> None:
         if not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= 100_000:
             raise ValueError(f"num_envs = {num_envs!r} is outside the allowed range [1, 100000]")
         if not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1:
@@ -338,6 +344,10 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
         if not isinstance(num_threads, (int, np.integer)) or not 1 <= num_threads <= min(num_envs, 256):
             raise ValueError(f"num_threads = {num_threads!r} is outside the allowed range [1, {min(num_envs, 256)}] "
                              f"(at most one thread per env)")
+        self.device = check_device(device)
+        if self.device == "cuda" and num_threads != 1:
+            raise ValueError(f"num_threads = {num_threads!r} with device = 'cuda': the GPU steps every env in one "
+                             f"launch; use num_threads = 1")
         self.task = GraspTask(**settings)
         self.num_envs = int(num_envs)
         self.num_threads = int(num_threads)
@@ -351,7 +361,7 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
         bounds = np.linspace(0, self.num_envs, self.num_threads + 1).round().astype(int)
         self._shard_ranges = list(zip(bounds[:-1], bounds[1:], strict=True))
         """Each shard's envs, as (first, end) index pairs."""
-        self._shards = [_Shard(self.task, end - first, self.max_episode_steps, self._low, self._high)
+        self._shards = [_Shard(self.task, end - first, self.max_episode_steps, self._low, self._high, self.device)
                         for first, end in self._shard_ranges]
         self._pool = None
         if self.num_threads > 1:
@@ -417,10 +427,11 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
 class _Shard:
     """Consecutive envs of a vector in one batched simulator: their episodes, seeds, step counts and autoresets."""
 
-    def __init__(self, task: GraspTask, size: int, max_episode_steps: int, low: np.ndarray, high: np.ndarray) -> None:
+    def __init__(self, task: GraspTask, size: int, max_episode_steps: int, low: np.ndarray, high: np.ndarray,
+                 device: str) -> None:
         self.task, self.size, self.max_episode_steps = task, size, max_episode_steps
         self.low, self.high = low, high
-        self.batch = GraspBatch(task, size)
+        self.batch = GraspBatch(task, size, device)
         self.rngs: list[np.random.Generator] = []
         self.steps = np.zeros(size, dtype=np.int64)
         self.autoreset = np.zeros(size, dtype=bool)

@@ -26,6 +26,7 @@ from .physics import (
     Scene,
     Simulator,
     Sphere,
+    check_device,
     check_range,
     fluid_forces,
     paper_finger,
@@ -33,6 +34,7 @@ from .physics import (
     put_grippers,
     take_grippers,
 )
+from .physics.solvers.gpu import cuda_module
 
 MODELS = ("planar", "3d")
 
@@ -444,11 +446,15 @@ class StepOutcome:
 
 
 class GraspBatch:
-    """B episodes of the grasp task stepped together in one batched simulator."""
+    """B episodes of the grasp task stepped together in one batched simulator, whose physics runs on ``device``
+    ("cpu", or "cuda": :class:`~.physics.simulator.Simulator`); the task's own arrays are the host's either way."""
 
-    def __init__(self, task: GraspTask, batch_size: int) -> None:
+    def __init__(self, task: GraspTask, batch_size: int, device: str = "cpu") -> None:
         self.task = task
         self.batch_size = batch_size
+        self.device = check_device(device)
+        if self.device == "cuda":
+            cuda_module()  # no GPU, or no numba-cuda: say so now, not at the first reset
         self.sim: Simulator | None = None
         self.state: RodState | None = None
         self.kind = None
@@ -499,7 +505,7 @@ class GraspBatch:
                 raise ValueError(f"reset option scene = {kind!r}: a vector of environments runs one kind of scene; "
                                  f"reset all of them together to change it")
             order = np.argsort(indices)
-            self.sim = Simulator([scenes[i] for i in order])
+            self.sim = Simulator([scenes[i] for i in order], device=self.device)
             self.kind = kind
             self.state = self.sim.initial_state()
         elif len(indices) == self.batch_size:

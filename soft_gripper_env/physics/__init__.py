@@ -40,6 +40,7 @@ from .scene.scene import (
 )
 from .scene.validation import check_range
 from .simulator import Simulator, Trajectory, run_ramp
+from .solvers.gpu import GpuUnavailable, GpuUnsupported, check_device
 from .solvers.records import ContactReport, RodState, StepResult, put_grippers, take_grippers
 
 __all__ = [
@@ -50,5 +51,6 @@ __all__ = [
     "ContactSettings",
     "Sphere", "INTEGRATOR_NAMES", "NATURAL_CURVATURE_LIMIT", "NewtonSettings", "Scene", "cantilever_scene",
     "paper_scene", "check_range", "Simulator", "Trajectory", "run_ramp", "ContactReport", "RodState", "StepResult",
-    "put_grippers", "take_grippers", "StepContext", "evaluate_force",
+    "put_grippers", "take_grippers", "StepContext", "evaluate_force", "GpuUnavailable", "GpuUnsupported",
+    "check_device",
 ]

@@ -30,7 +30,7 @@ from .scene.forces import BodyLoads, ForceTerms
 from .scene.objects import ContactSettings
 from .scene.scene import NATURAL_CURVATURE_LIMIT, Scene
 from .solvers.corrector import ContactGeometry, contact_masks, solve_with_contact
-from .solvers.gpu import GpuRods, GpuUnsupported, RodsKernelShape, check_device
+from .solvers.gpu import GpuGrasp, GpuRods, GpuUnsupported, GraspKernelShape, RodsKernelShape, check_device
 from .solvers.integrators import INTEGRATORS
 from .solvers.newton import (
     Holds,
@@ -155,8 +155,9 @@ class Simulator:
 
     def __init__(self, scene: Scene | Sequence[Scene], batch_size: int | None = None, device: str = "cpu") -> None:
         self.device = check_device(device)
-        """Where :meth:`advance` steps the batch: "cpu", or "cuda" (:mod:`.solvers.gpu`: rods on their own today;
-        every other call runs on the CPU)."""
+        """Where :meth:`advance` steps the batch: "cpu", or "cuda" (:mod:`.solvers.gpu`: rods on their own, or
+        grasping a fixed or free object, with the backward-Euler integrator; a step to be halved, and every other
+        call, runs on the CPU)."""
         scenes = [scene] if isinstance(scene, Scene) else list(scene)
         if not scenes or not all(isinstance(s, Scene) for s in scenes):
             raise ValueError("Simulator.scene must be a Scene or a non-empty sequence of Scenes")
@@ -229,15 +230,12 @@ class Simulator:
                 raise ValueError(f"Simulator.scene[{index}] differs from scene[0] in more than the grasped object's "
                                  f"size, place, density and velocity and the water's current")
             self._load(index, each)
-        self._gpu: GpuRods | None = None
+        self._gpu: GpuRods | GpuGrasp | None = None
         if device == "cuda":
-            if self._has_object:
-                raise GpuUnsupported("Simulator(device='cuda'): scenes with a grasped object (the contact corrector "
-                                     "and the free body) do not run on the GPU yet; rods on their own do")
             if scene.integrator != "backward_euler":
                 raise GpuUnsupported(f"Simulator(device='cuda'): the integrator {scene.integrator!r} does not run "
                                      f"on the GPU yet; backward_euler does")
-            self._gpu = GpuRods(*self.gpu_constants())
+            self._gpu = (GpuGrasp if self._has_object else GpuRods)(*self.gpu_constants())
 
     def set_scene(self, index: int, scene: Scene, start_time: float = 0.0) -> None:
         """Gives gripper ``index`` another scene, which may differ from the batch's only in the grasped object's
@@ -407,7 +405,7 @@ class Simulator:
             k = take_steps(k, n_steps, dt, water, work, rods, self._plain_terms, self._per_step(dt),
                            self._plain_geometry, self._projection, body, interval)
             if interval.pending.any():  # the others took step k; it is halved for the grippers left pending
-                self._halve_pending(work, times[k], dt, interval)
+                self._halve_pending(work, times[k], dt, interval, np.nonzero(interval.pending)[0])
                 k += 1
             elif k < n_steps and interval.running.any():
                 raise RuntimeError(f"take_steps stopped at step {k} of {n_steps} with grippers running and none "
@@ -420,24 +418,50 @@ class Simulator:
                       impulse=interval.impulse.reshape(B, F, N, 3))
 
     def gpu_constants(self) -> tuple:
-        """The first arguments of :class:`~.solvers.gpu.GpuRods` for this batch: its constants and kernel shape."""
+        """The first arguments of this batch's GPU stepper (:class:`~.solvers.gpu.GpuRods` for rods on their own,
+        :class:`~.solvers.gpu.GpuGrasp` with an object): its constants and kernel shape."""
         disc = self.disc
-        shape = RodsKernelShape(self.n_fingers, disc.n_nodes, disc.stride, disc.dim,
-                                self._finger_contact.stiffness > 0.0)
-        return (self._plain_rods, self._plain_terms, self._per_step(self.scene.time_step), disc.finger_directions,
-                shape)
+        finger_contact = self._finger_contact.stiffness > 0.0
+        solver = self._per_step(self.scene.time_step)
+        if self._has_object:
+            shape = GraspKernelShape(self.n_fingers, disc.n_nodes, disc.stride, disc.dim, finger_contact,
+                                     self._body is not None)
+            return self._plain_rods, self._plain_terms, solver, self._projection, shape
+        shape = RodsKernelShape(self.n_fingers, disc.n_nodes, disc.stride, disc.dim, finger_contact)
+        return self._plain_rods, self._plain_terms, solver, disc.finger_directions, shape
 
     def _advance_on_gpu(self, work: WorkingState, interval: Interval, times: list[float], n_steps: int) -> Advance:
-        """:meth:`advance`'s steps on the GPU (:class:`~.solvers.gpu.GpuRods`), from and into ``work`` and
-        ``interval``: rods on their own, a failed step not halved (the gripper stops there)."""
+        """:meth:`advance`'s steps on the GPU, from and into ``work`` and ``interval``. With an object
+        (:class:`~.solvers.gpu.GpuGrasp`), a step that a gripper does not settle is halved here on the CPU, as
+        :meth:`advance` halves it, and the gripper goes on from the next step on the GPU. Rods on their own
+        (:class:`~.solvers.gpu.GpuRods`): a failed step is not halved (the gripper stops there)."""
         B, F, N = self.batch_size, self.n_fingers, self.disc.n_nodes
+        dt = self.scene.time_step
         water = np.zeros((n_steps + 1, B, 3)) if self._currents is None else self._currents.at_times(times)
-        clock_before = interval.clock.copy()
-        self._gpu.advance((work.q, work.velocity, work.acceleration, work.tangent, work.director,
-                           work.reference_twist), water, interval.natural_curvature, interval.curvature_rate,
-                          (interval.curvature_low, interval.curvature_high), interval.running, interval.failed,
-                          interval.clock, interval.newton_iterations, self.scene.time_step, n_steps)
-        taken = int(np.rint((interval.clock - clock_before) / self.scene.time_step).max())
+        if isinstance(self._gpu, GpuGrasp):
+            body = None if self._body is None else self._body.plain_arrays
+            first_steps = np.zeros(B, dtype=np.int64)
+            stopped = np.full(B, n_steps)  # the step where each gripper stopped: the batch's time is the last's
+            while True:
+                stops = self._gpu.advance(tuple(work), self._plain_geometry, body, tuple(interval), water,
+                                          first_steps, dt, n_steps)
+                resumed = first_steps < n_steps
+                stopped[resumed] = stops[resumed]
+                pending = np.nonzero(interval.pending)[0]
+                if not pending.size:
+                    break
+                for k in np.unique(stops[pending]):  # each gripper's unsettled step, halved
+                    self._halve_pending(work, times[k], dt, interval, pending[stops[pending] == k])
+                first_steps = np.full(B, n_steps)
+                first_steps[pending] = stops[pending] + 1
+            taken = int(stopped.max())
+        else:
+            clock_before = interval.clock.copy()
+            self._gpu.advance((work.q, work.velocity, work.acceleration, work.tangent, work.director,
+                               work.reference_twist), water, interval.natural_curvature, interval.curvature_rate,
+                              (interval.curvature_low, interval.curvature_high), interval.running, interval.failed,
+                              interval.clock, interval.newton_iterations, dt, n_steps)
+            taken = int(np.rint((interval.clock - clock_before) / dt).max())
         return record(Advance, state=self._state_of(work, times[taken]),
                       natural_curvature=interval.natural_curvature.reshape(B, F), clock=interval.clock,
                       failed=interval.failed, newton_iterations=interval.newton_iterations,
@@ -452,12 +476,12 @@ class Simulator:
         self._commit(np.arange(self.batch_size), result.converged & finite(result.state), result.newton_iterations,
                      result, dt, work, interval)
 
-    def _halve_pending(self, work: WorkingState, time: float, dt: float, interval: Interval) -> None:
-        """The step at ``time`` [s] of :meth:`advance` for the grippers that the compiled steps left pending: two
+    def _halve_pending(self, work: WorkingState, time: float, dt: float, interval: Interval,
+                       grippers: np.ndarray) -> None:
+        """The step at ``time`` [s] of :meth:`advance` for ``grippers``, which the compiled steps left pending: two
         half steps, each halved again as the adaptive path allows (:meth:`_halves`), committed into ``work`` and
         ``interval``."""
-        grippers = np.nonzero(interval.pending)[0]
-        interval.pending[:] = False
+        interval.pending[grippers] = False
         natural_curvature = interval.natural_curvature.reshape(self.batch_size, -1)[grippers].ravel()
         sub, first, second = self._halves(take_grippers(self._state_of(work, time), grippers), grippers,
                                           natural_curvature, dt, self.scene.newton.max_step_halvings)

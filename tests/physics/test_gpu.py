@@ -10,14 +10,17 @@ import os
 import subprocess
 import sys
 import textwrap
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from numba import njit
 
 from benchmarks.gpu_speed import fingers_alone
-from soft_gripper_env.grasp_task import GraspTask, task_episode
+from soft_gripper_env.grasp_task import GraspBatch, GraspTask
 from soft_gripper_env.physics import Simulator
+from soft_gripper_env.physics.kernels.local import local_array
 from soft_gripper_env.physics.solvers.gpu import GpuUnavailable, GpuUnsupported, cuda_module
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -44,6 +47,50 @@ for model in ("planar", "3d"):
             arrays += [state.tangent, state.director, state.reference_twist]
         out[model + "/" + device] = [np.asarray(a, dtype=float).ravel().tolist() for a in arrays]
         out[model + "/" + device + "/time"] = state.time
+print("RESULT " + json.dumps(out))
+"""
+
+
+# two grippers of the task's first two episodes, each grasping its own object: the task's free sphere, or the paper's
+# fixed ball; closing, then opening a little. Newton's iterations are capped low so that some steps are halved (on the
+# CPU, in both paths). Printed as JSON with how many grippers' steps were halved.
+_GRASP_RUN = """
+import json
+from dataclasses import replace
+import numpy as np
+from soft_gripper_env.grasp_task import GraspTask, task_episode
+from soft_gripper_env.physics import PAPER_BALL, Simulator
+
+out = {}
+for model in ("planar", "3d"):
+    task = GraspTask(model=model)
+    free = [task_episode(task, np.random.default_rng(seed), {}).scene for seed in range(2)]
+    fixed = [replace(scene, grasped_object=PAPER_BALL) for scene in free]
+    for name, scenes in (("free", free), ("fixed", fixed)):
+        scenes = [replace(scene, newton=replace(scene.newton, max_iterations=4)) for scene in scenes]
+        for device in ("cpu", "cuda"):
+            sim = Simulator(scenes, device=device)
+            halved = []
+            sim._halve_pending = lambda *args, original=sim._halve_pending: (halved.append(len(args[-1])),
+                                                                             original(*args))
+            state, curvature, clock = sim.initial_state(), np.zeros((2, 3)), np.zeros(2)
+            impulses = []
+            for interval in range(24):
+                rate = [[-0.3, -0.3, -0.3], [-0.3, -0.2, -0.3]] if interval < 20 else 0.1
+                advanced = sim.advance(state, curvature, rate, task.substeps, task.curvature_range, clock=clock)
+                state, curvature, clock = advanced.state, advanced.natural_curvature, advanced.clock
+                impulses += [advanced.normal_impulse, advanced.impulse, advanced.newton_iterations, advanced.failed]
+            arrays = [state.q, state.velocity, state.acceleration, state.held, curvature, clock] + impulses
+            if model == "3d":
+                arrays += [state.tangent, state.director, state.reference_twist]
+            if name == "free":
+                arrays += [state.hold_offset, state.body_position, state.body_velocity, state.body_orientation,
+                           state.body_angular_velocity]
+            key = model + "/" + name + "/" + device
+            out[key] = [np.asarray(a, dtype=float).ravel().tolist() for a in arrays]
+            out[key + "/time"] = state.time
+            out[key + "/halved"] = sum(halved)
+            out[key + "/held"] = int(state.held.sum())
 print("RESULT " + json.dumps(out))
 """
 
@@ -96,31 +143,80 @@ def test_simulated_kernel_steps_exactly_as_the_cpu():
 
 @pytest.mark.slow
 @needs_numba_cuda
-def test_kernels_compile_to_ptx_for_sm_90():
-    """Both models' kernels, with every physics function they call, compile for an H100/H200 (sm_90) without a GPU
-    from the shared ``@njit`` source: the check that nothing on the GPU's path allocates or needs what the GPU
-    lacks."""
-    script = """
-    import json, time
-    from benchmarks.gpu_speed import fingers_alone
-    from soft_gripper_env.physics import Simulator
-    from soft_gripper_env.physics.solvers.gpu import rods_ptx
+def test_simulated_grasp_kernel_steps_exactly_as_the_cpu():
+    """The grasp kernel in the CUDA simulator gives the CPU path's grasp bit for bit, planar and 3-D, on a free
+    sphere and on a fixed ball: the fingers' state and holds, the body's state and holds' offsets, κ̄, clocks, the
+    impulses of the contact reactions, Newton iterations and failures, interval by interval, with steps that the
+    GPU path leaves to the CPU to halve and then resumes."""
+    result = _result(_python(_GRASP_RUN, simulator=True))
+    for model in ("planar", "3d"):
+        for name in ("free", "fixed"):
+            key = model + "/" + name
+            cpu, gpu = result[key + "/cpu"], result[key + "/cuda"]
+            assert len(cpu) == len(gpu)
+            for index, (a, b) in enumerate(zip(cpu, gpu, strict=True)):
+                assert np.array_equal(np.array(a), np.array(b)), (key, index)
+            assert result[key + "/cpu/time"] == result[key + "/cuda/time"]
+            assert result[key + "/cpu/held"] > 0, key  # the fingers grasp
+            assert result[key + "/cuda/halved"] == result[key + "/cpu/halved"]
+    assert sum(result[key] for key in result if key.endswith("/cuda/halved")) > 0  # some steps were halved
 
-    out = {}
-    for model in ("planar", "3d"):
-        sim = Simulator(fingers_alone(model, 1)[0])
-        work = sim._working_state(sim.initial_state(), copy=True)
-        start = time.perf_counter()
-        ptx = rods_ptx(sim.gpu_constants(), (work.q, work.velocity, work.acceleration, work.tangent,
-                                             work.director, work.reference_twist), 1)
-        out[model] = {"target": ".target sm_90" in ptx, "entry": ptx.count(".entry"),
-                      "seconds": time.perf_counter() - start}
-    print("RESULT " + json.dumps(out))
-    """
-    result = _result(_python(script, simulator=False))
-    for model in ("planar", "3d"):
-        assert result[model]["target"], model
-        assert result[model]["entry"] == 1, model
+
+# one rod model's kernels compiled to PTX for sm_90 without a GPU: the rods alone, and grasping a free and a fixed
+# object; printed as JSON with each one's seconds
+_PTX = """
+import json, sys, time
+from dataclasses import replace
+import numpy as np
+from benchmarks.gpu_speed import fingers_alone
+from soft_gripper_env.grasp_task import GraspTask, task_episode
+from soft_gripper_env.physics import PAPER_BALL, Simulator
+from soft_gripper_env.physics.solvers.gpu import grasp_ptx, rods_ptx
+from soft_gripper_env.physics.solvers.stepping import Interval
+
+model = sys.argv[1]
+out = {}
+sim = Simulator(fingers_alone(model, 1)[0])
+work = sim._working_state(sim.initial_state(), copy=True)
+start = time.perf_counter()
+ptx = rods_ptx(sim.gpu_constants(), (work.q, work.velocity, work.acceleration, work.tangent, work.director,
+                                     work.reference_twist), 1)
+out["rods"] = {"target": ".target sm_90" in ptx, "entry": ptx.count(".entry"), "seconds": time.perf_counter() - start}
+free = task_episode(GraspTask(model=model), np.random.default_rng(0), {}).scene
+for name, scene in (("free", free), ("fixed", replace(free, grasped_object=PAPER_BALL))):
+    sim = Simulator(scene)
+    work = sim._working_state(sim.initial_state(), copy=True)
+    R, N = sim.n_rods, sim.disc.n_nodes
+    interval = Interval(np.zeros(R), np.zeros(R), -0.2, 0.0, np.ones(1, bool), np.zeros(1, bool), np.zeros(1),
+                        np.zeros(1, np.int64), np.zeros((R, N)), np.zeros((R, N, 3)), np.zeros(1, bool), True)
+    body = None if sim._body is None else sim._body.plain_arrays
+    start = time.perf_counter()
+    ptx = grasp_ptx(sim.gpu_constants(), tuple(work), sim._plain_geometry, body, tuple(interval))
+    out[name] = {"target": ".target sm_90" in ptx, "entry": ptx.count(".entry"),
+                 "seconds": time.perf_counter() - start}
+print("RESULT " + json.dumps(out))
+"""
+
+
+@pytest.mark.slow
+@needs_numba_cuda
+def test_kernels_compile_to_ptx_for_sm_90():
+    """Every kernel, with every physics function it calls, compiles for an H100/H200 (sm_90) without a GPU from the
+    shared ``@njit`` source, in both rod models: the rods alone, and grasping a free and a fixed object. The check
+    that nothing on the GPU's path allocates or needs what the GPU lacks. The two models compile side by side, one
+    process each."""
+    env = dict(os.environ)
+    env.pop("NUMBA_ENABLE_CUDASIM", None)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    runs = {model: subprocess.Popen([sys.executable, "-c", textwrap.dedent(_PTX), model], stdout=subprocess.PIPE,
+                                    stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
+            for model in ("planar", "3d")}
+    for model, run in runs.items():
+        stdout, stderr = run.communicate(timeout=1200)
+        result = _result(subprocess.CompletedProcess(run.args, run.returncode, stdout, stderr))
+        for kernel in ("rods", "free", "fixed"):
+            assert result[kernel]["target"], (model, kernel)
+            assert result[kernel]["entry"] == 1, (model, kernel)
 
 
 def test_device_is_checked():
@@ -129,11 +225,36 @@ def test_device_is_checked():
         Simulator(scene, device="tpu")
 
 
-def test_a_scene_with_an_object_is_refused_on_the_gpu_for_now():
-    task = GraspTask(model="planar")
-    scene = task_episode(task, np.random.default_rng(0), {}).scene
-    with pytest.raises(GpuUnsupported, match="grasped object"):
+def test_an_integrator_other_than_backward_euler_is_refused_on_the_gpu():
+    scene = replace(fingers_alone("planar", 1)[0][0], integrator="implicit_midpoint")
+    with pytest.raises(GpuUnsupported, match="'implicit_midpoint'"):
         Simulator(scene, device="cuda")
+
+
+def test_local_array_is_numpys_empty_on_the_cpu():
+    """The kernels' small work arrays: on the CPU an uninitialised float64 array of the constant shape asked for,
+    a new one at every call."""
+
+    @njit
+    def make():
+        vector, matrix = local_array(3), local_array((2, 6))
+        vector[:] = 1.0
+        matrix[:, :] = 2.0
+        return vector, matrix, local_array(3)
+
+    vector, matrix, other = make()
+    assert vector.shape == (3,) and matrix.shape == (2, 6) and vector.dtype == np.float64
+    assert vector.sum() == 3.0 and matrix.sum() == 24.0
+    assert not np.shares_memory(vector, other)
+
+
+def test_the_vector_env_checks_its_device():
+    from soft_gripper_env.env import SoftGripperUnderwaterVectorEnv
+
+    with pytest.raises(ValueError, match="device = 'gpu'"):
+        SoftGripperUnderwaterVectorEnv(2, device="gpu")
+    with pytest.raises(ValueError, match="num_threads = 2 with device = 'cuda'"):
+        SoftGripperUnderwaterVectorEnv(2, num_threads=2, device="cuda")
 
 
 def test_without_a_gpu_the_error_says_what_to_install():
@@ -145,6 +266,8 @@ def test_without_a_gpu_the_error_says_what_to_install():
         pytest.skip("a GPU (or the simulator) is available here")
     with pytest.raises(GpuUnavailable, match=r'pip install -e "\.\[gpu\]"'):
         Simulator(fingers_alone("planar", 1)[0][0], device="cuda")
+    with pytest.raises(GpuUnavailable, match=r'pip install -e "\.\[gpu\]"'):  # at construction, not at reset
+        GraspBatch(GraspTask(model="planar"), 2, device="cuda")
 
 
 def _gpu_available() -> bool:

@@ -1,26 +1,27 @@
 """The GPU back end: the steps of a control interval on an NVIDIA GPU, one CUDA thread per gripper, compiled by
 Numba from the same functions as the CPU kernels.
 
-There is one copy of the physics. The CUDA kernel here is only the loop a CPU entry point runs around the shared
-functions: it copies its gripper's state into the thread's own arrays, takes the interval's steps by calling the
-very ``@njit`` functions the CPU calls (:func:`~.newton.step_gripper_rods`, and through it the rods' energies, the
-water, the contact between the fingers, the banded factorisation and Newton's loop), and writes the state back.
-Numba's CUDA target compiles a CPU-compiled function it meets in a kernel from that function's Python source, as a
-device function, and so does every function it calls. For that, the shared functions allocate nothing (their work
-arrays come in as arguments: made once per call on the CPU, the thread's ``cuda.local.array`` on the GPU) and use
-only what both targets have (``math`` rather than NumPy's ufuncs on scalars).
+There is one copy of the physics. A CUDA kernel here is only the loop a CPU entry point runs around the shared
+functions, compiled by numba-cuda: it meets a CPU-compiled (``@njit``) function in a kernel and compiles it from its
+Python source as a device function, with everything it calls. For that, the shared functions allocate nothing
+(their work arrays come in as arguments: made once per call on the CPU, the thread's ``cuda.local.array`` on the
+GPU; a few numbers of scratch from :func:`~..kernels.local.local_array`) and use only what both targets have
+(``math`` rather than NumPy's ufuncs on scalars).
 
-**Layout.** A thread per gripper, its rods' state, bands and work arrays in the thread's local memory, which the GPU
-interleaves across the threads of a warp, so that the same element of neighbouring threads' arrays is read in one
-transaction. The arrays' sizes are the kernel's compile-time constants (fingers, nodes, coordinates per node), so a
-kernel is compiled per gripper design.
+**Two kernels**, one thread per gripper, a launch per control interval:
 
-**What runs here today.** Rods on their own (no grasped object): planar and 3-D, with gravity, buoyancy, the
-water's drag and added mass, the current (evaluated on the host for every step of the interval and copied once) and
-contact between the fingers, with the backward-Euler integrator. A step that Newton does not settle is not halved
-on the GPU yet: the gripper stops there and is reported failed, keeping its last good state. Scenes with a grasped
-object (the corrector, the free body) are the next part of this back end; asking for one on the GPU raises
-:class:`GpuUnsupported`.
+- the rods on their own (:class:`GpuRods`): the thread copies its gripper's state into its own arrays and takes the
+  interval's steps with :func:`~.newton.step_gripper_rods` (the rods' energies, the water, the contact between the
+  fingers, the banded factorisation and Newton's loop) and :func:`~..kernels.rod_3d.rod_frames`;
+- grasping a fixed object or a free body (:class:`GpuGrasp`): the thread runs :func:`~.stepping.step_batch`, the
+  CPU's own loop of steps (predictor, contact corrector, the free body's coupled solve, the step's end, the contact
+  reactions), on its gripper alone, with its scratch in its own arrays. A step the gripper does not settle is left
+  pending, and the host halves it on the CPU as the CPU path does, then launches again from the next step.
+
+A thread's local memory is interleaved across the threads of a warp by the GPU, so the same element of neighbouring
+threads' arrays is read in one transaction. The arrays' sizes are a kernel's compile-time constants (fingers, nodes,
+coordinates per node), so a kernel is compiled per gripper design. Only the backward-Euler integrator runs here;
+another raises :class:`GpuUnsupported`.
 
 **Installation.** ``pip install -e ".[gpu]"`` brings numba-cuda and the CUDA libraries it needs; without it the
 package works as before and ``device="cuda"`` raises :class:`GpuUnavailable` saying what to install. Tests run the
@@ -32,6 +33,8 @@ from __future__ import annotations
 import importlib
 import math
 import os
+import sys
+from contextlib import contextmanager
 from typing import NamedTuple
 
 import numpy as np
@@ -44,7 +47,9 @@ from ..kernels.forces import project_water
 from ..kernels.local import local_array
 from ..kernels.rod_3d import elastic_scratch_size, elastic_views, rod_frames
 from ..scene.forces import ForceTerms
+from .corrector import CorrectorWork
 from .newton import NewtonWork, SolverArrays, SolveResult, step_gripper_rods
+from .stepping import Interval, StepWork, WorkingState, step_batch
 
 THREADS_PER_BLOCK = 64
 """CUDA threads (grippers) per block: each thread holds tens of kilobytes of local arrays, so small blocks keep
@@ -150,6 +155,36 @@ def cuda_module():
 def simulated(cuda) -> bool:
     """Whether ``cuda`` is Numba's CUDA simulator, which runs kernels as Python on the CPU (for tests)."""
     return bool(getattr(cuda, "simulator_mode", False) or os.environ.get("NUMBA_ENABLE_CUDASIM") == "1")
+
+
+@contextmanager
+def calls_kept_apart():
+    """While a kernel compiles for the GPU: the shared functions that the CPU inlines at Numba's IR level
+    (``inline="always"``) are compiled as device functions instead, once per signature, and NVVM inlines them at
+    the LLVM level as it sees fit. The CPU inlines them to keep reference counts out of Newton's loops, which a GPU
+    build does not have; copying each one's IR into every caller made the grasp kernel's compile several times
+    longer (the IR's deep copies took two thirds of it). The CPU dispatchers' option is restored on leaving, so a
+    CPU compile must not run meanwhile (kernels compile on their first launch, from the simulator's thread)."""
+    inlined = []
+    for name, module in list(sys.modules.items()):
+        if not name.startswith(_PHYSICS) or module is None:
+            continue
+        for value in vars(module).values():
+            options = getattr(value, "targetoptions", None)
+            if isinstance(options, dict) and options.get("inline") == "always" and \
+                    getattr(value, "__module__", "").startswith(_PHYSICS):
+                inlined.append(options)
+    for options in inlined:
+        options["inline"] = "never"
+    try:
+        yield
+    finally:
+        for options in inlined:
+            options["inline"] = "always"
+
+
+_PHYSICS = __name__.rsplit(".", 2)[0]
+"""The physics core's package, whose modules hold the shared functions."""
 
 
 class RodsKernelShape(NamedTuple):
@@ -375,13 +410,252 @@ class GpuRods:
         κ̄ (R,), ``running``, ``failed`` (B,) bool, ``clock`` (B,) [s], ``iterations`` (B,) int."""
         arguments, host, device = self.arguments(state, gripper_water, natural_curvature, rate, curvature_range,
                                                  running, failed, clock, iterations, dt, n_steps)
-        n_grippers = running.shape[0]
-        blocks = (n_grippers + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
-        rods_kernel(self.shape)[blocks, THREADS_PER_BLOCK](*arguments)
-        if not simulated(self.cuda):
-            for array, on_device in zip(host, device, strict=True):
-                if array.size:
-                    on_device.copy_to_host(array)
+        _launch(rods_kernel(self.shape), running.shape[0], arguments, host, device)
+
+
+class GraspKernelShape(NamedTuple):
+    """What a grasp kernel's arrays are sized by, and what it compiles in: its compile-time constants."""
+
+    n_fingers: int
+    n_nodes: int
+    stride: int
+    """Coordinates per node S: 2 planar, 4 in 3-D (position and twist)."""
+    dim: int
+    """Position coordinates per node D: 2 planar, 3 in 3-D."""
+    finger_contact: bool
+    """Whether the fingers touch each other."""
+    free_body: bool
+    """Whether the object is a free body (else it is fixed)."""
+
+
+def grasp_kernel(shape: GraspKernelShape):
+    """The CUDA kernel that takes the steps of a control interval of grippers grasping an object, for grippers of
+    ``shape``, one thread per gripper (compiled on its first launch, then kept): each thread runs
+    :func:`~.stepping.step_batch`, the CPU's own loop, on its gripper alone, with its scratch in the thread's own
+    arrays. Its arguments are tuples (a tuple reaches the simulator's threads as the host's arrays):
+    ``state`` the :class:`~.stepping.WorkingState`'s fields; ``rods`` the design's fields of
+    :class:`~..kernels.assembly.RodArrays`; ``terms`` the :class:`~..scene.forces.ForceTerms`' fields; ``solver``
+    the :class:`~.newton.SolverArrays`' fields for one gripper's F rods; ``geometry`` = (the
+    :class:`~.corrector.ContactGeometry`'s fields, the projection (F, D, 3)); ``body`` the
+    :class:`~..kernels.body.BodyArrays`' fields (a placeholder for a fixed object); ``interval`` the
+    :class:`~.stepping.Interval`'s fields; ``timing`` = (gripper water (K + 1, B, 3) [m/s], each gripper's first
+    step (B,) int, where each stopped (B,) int, written, dt [s], K)."""
+    kernel = _GRASP_KERNELS.get(shape)
+    if kernel is None:
+        cuda_module()
+        kernel = _GRASP_KERNELS[shape] = _build_grasp_kernel(shape)
+    return kernel
+
+
+_GRASP_KERNELS: dict[GraspKernelShape, object] = {}
+
+
+def _build_grasp_kernel(shape: GraspKernelShape):
+    F, N, S, D = shape.n_fingers, shape.n_nodes, shape.stride, shape.dim
+    n = N * S
+    band = 3 * S  # kd + 1
+    three_d = S == 4
+    free = shape.free_body
+    planar_free = free and not three_d
+    # a local array has at least one element: what a model or object does not have is an empty slice of one
+    edges = N - 1
+    framed = F if three_d else 0
+    held_by_body = F if free else 0
+    bodies = 1 if free else 0
+    contact_fingers = F if shape.finger_contact else 0
+    elastic_size = elastic_scratch_size(N if three_d else 0)
+    finger_size = finger_scratch_size(contact_fingers, N)
+    float64, int64, boolean = types.float64, types.int64, types.boolean
+
+    @cuda.jit
+    def grasp_interval(state, rods_design, terms, solver, geometry_projection, body, interval, timing):
+        b = cuda.grid(1)
+        running = interval[4]
+        if b >= running.shape[0]:
+            return
+        gripper_water, first_steps, stops, dt, n_steps = timing
+        first = b * F
+        last = first + F
+        q, velocity, acceleration, held, hold_offset, tangent, director, twist, position, body_velocity, \
+            orientation, angular_velocity = state
+        # the gripper's own rods and body: views of the batch's arrays
+        own = WorkingState(q[first:last], velocity[first:last], acceleration[first:last], held[first:last],
+                           hold_offset[first:first + held_by_body], tangent[first:first + framed],
+                           director[first:first + framed], twist[first:first + framed],
+                           position[b:b + bodies], body_velocity[b:b + bodies], orientation[b:b + bodies],
+                           angular_velocity[b:b + bodies])
+        natural_curvature, rate, low, high, _, failed, clock, iterations, normal_impulse, impulse, pending, \
+            halve = interval
+        own_interval = Interval(natural_curvature[first:last], rate[first:last], low, high, running[b:b + 1],
+                                failed[b:b + 1], clock[b:b + 1], iterations[b:b + 1], normal_impulse[first:last],
+                                impulse[first:last], pending[b:b + 1], halve)
+        geometry, projection = geometry_projection
+        starts, ends, radii, finger_radius, friction, directions, plane_normals, any_motion = geometry
+        own_geometry = (starts[first:last], ends[first:last], radii[first:last], finger_radius, friction[first:last],
+                        directions, plane_normals, any_motion[b:b + (1 if free and three_d else 0)])
+        if three_d:
+            rods = rods_design + (own.tangent, own.director, own.reference_twist)
+        else:
+            rods = rods_design + (tangent[:0], director[:0], twist[:0])
+        own_body = None
+        if free:
+            own_body = (body[0][b:b + 1], body[1][b:b + 1], body[2][b:b + 1], body[3][b:b + 1], body[4][b:b + 1],
+                        body[5][b:b + 1], body[6][b:b + 1], body[7][b:b + 1], body[8][b:b + 1], body[9][b:b + 1],
+                        body[10][b:b + 1], body[11][b:b + 1], body[12][b:b + 1], body[13][b:b + 1], body[14],
+                        body[15], body[16], body[17])
+        # the scratch (stepping.step_work's, for one gripper), in the thread's own arrays
+        flags = cuda.local.array((8, F), boolean)
+        node_flags = cuda.local.array((6, F, N), boolean)
+        counts = cuda.local.array((3, F), int64)
+        ratios = cuda.local.array((3, F), float64)
+        for f in range(F):  # new_work's zeros: nothing rubs or touches before a solve says so
+            flags[3, f] = False
+        new = WorkingState(cuda.local.array((F, N, S), float64), cuda.local.array((F, N, S), float64),
+                           cuda.local.array((F, N, S), float64), node_flags[0],
+                           cuda.local.array((F, N, 3), float64)[:held_by_body],
+                           cuda.local.array((F, edges, 3), float64)[:framed],
+                           cuda.local.array((F, edges, 3), float64)[:framed],
+                           cuda.local.array((F, N), float64)[:framed],
+                           cuda.local.array((1, 3), float64)[:bodies], cuda.local.array((1, 3), float64)[:bodies],
+                           cuda.local.array((1, 3, 3), float64)[:bodies], cuda.local.array((1, 3), float64)[:bodies])
+        rod_steps = cuda.local.array((2, F, n), float64)  # x0 and the rods' last steps
+        for f in range(F):
+            for j in range(n):
+                rod_steps[1, f, j] = 0.0
+        newton = NewtonWork(
+            cuda.local.array((N, S), float64), cuda.local.array((N, D), float64), cuda.local.array((N, D), float64),
+            cuda.local.array(elastic_size or 1, float64)[:elastic_size],
+            cuda.local.array(finger_size or 1, float64)[:finger_size],
+            cuda.local.array((F, n, band), float64),
+            cuda.local.array((F, n, 6), float64)[:held_by_body], rod_steps[0],
+            cuda.local.array((F, n, 6), float64)[:held_by_body], cuda.local.array((F, 6, 6), float64)[:held_by_body],
+            cuda.local.array((F, 6), float64)[:held_by_body], rod_steps[1], ratios[0], flags[0], flags[1], flags[2],
+            cuda.local.array(6, float64)[:6 * bodies], cuda.local.array((6, 6), float64)[:6 * bodies],
+            cuda.local.array(6, float64)[:6 * bodies], cuda.local.array(6, float64)[:6 * bodies],
+            cuda.local.array((3, 3), float64)[:3 * bodies], cuda.local.array((n, 6), float64)[:n * bodies],
+            cuda.local.array(band, float64), cuda.local.array((F, N, D), float64), cuda.local.array((D, D), float64),
+            flags[3], ratios[1])
+        points = cuda.local.array((4, F, N, D), float64)
+        corrector = CorrectorWork(flags[4], cuda.local.array((F, n), boolean), cuda.local.array((F, D), float64),
+                                  node_flags[1], node_flags[2], node_flags[3], points[0], node_flags[4], points[1],
+                                  flags[5], counts[0],
+                                  cuda.local.array((1, 6, 6), float64)[:1 if planar_free else 0], newton)
+        gripper = cuda.local.array(1, int64)
+        gripper[0] = 0
+        work = StepWork(cuda.local.array((F, N, S), float64), new, cuda.local.array((F, D), float64),
+                        cuda.local.array((1, 3), float64), cuda.local.array((F, N, F), int64)[:contact_fingers],
+                        node_flags[5], points[2], cuda.local.array((F, n), boolean), points[3], flags[6], flags[7],
+                        counts[1], counts[2], ratios[2], cuda.local.array((F, n), float64),
+                        cuda.local.array((F, N, 3), float64), cuda.local.array((F, N), float64),
+                        cuda.local.array(1, boolean), cuda.local.array(1, int64), gripper, corrector)
+        stops[b] = step_batch(first_steps[b], n_steps, dt, gripper_water[:, b:b + 1], own, rods, terms, solver,
+                              own_geometry, projection, own_body, own_interval, work)
+
+    return grasp_interval
+
+
+class GpuGrasp:
+    """Grippers grasping an object, stepped on the GPU: the batch's constants on the device, and :meth:`advance`.
+
+    ``rods``, ``terms``, ``solver``, ``geometry`` and ``projection`` are the plain fields the CPU's
+    :func:`~.stepping.take_steps` takes, ``body`` the free bodies' (None for a fixed object). The object's place
+    and friction (``geometry``) and the bodies' constants are copied at every :meth:`advance`, since a new episode
+    changes them. With ``host`` the arrays stay the host's and no GPU is needed (for :func:`grasp_ptx`)."""
+
+    def __init__(self, rods: tuple, terms: tuple, solver: tuple, projection: np.ndarray, shape: GraspKernelShape,
+                 host: bool = False) -> None:
+        self.cuda = None if host else cuda_module()
+        self.shape = shape
+        F = shape.n_fingers
+        self.rods = self._on_device(rods[:N_DESIGN_FIELDS])
+        self.terms = self._on_device(terms)
+        solver_arrays = SolverArrays(*solver)
+        one_gripper = solver_arrays._replace(tolerance_inverse=solver_arrays.tolerance_inverse[:F],
+                                             clamp_free=solver_arrays.clamp_free[:F])
+        self.solver = self._on_device(tuple(one_gripper))
+        self.projection = self._on_device(projection[:F])
+
+    def _on_device(self, value):
+        """``value`` with its arrays on the device, all the way down a tuple (the simulator's threads, and a host-only
+        instance, take the host's own); an empty array goes as one element of its dimensions, which the kernel
+        slices back to none."""
+        if isinstance(value, tuple):
+            return tuple(self._on_device(x) for x in value)
+        if not isinstance(value, np.ndarray):
+            return value
+        array = np.ascontiguousarray(value)
+        if self.cuda is None or simulated(self.cuda):
+            return array
+        if not array.size:
+            array = np.zeros((1,) * array.ndim, dtype=array.dtype)
+        return self.cuda.to_device(array)
+
+    def arguments(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, gripper_water: np.ndarray,
+                  first_steps: np.ndarray, stops: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, list, list]:
+        """The kernel's arguments, and the host arrays it writes with their device copies."""
+        n_grippers = first_steps.shape[0]
+        written = [*state, *(interval[i] for i in _INTERVAL_WRITTEN), stops]
+        device = [self._on_device(x) for x in written]
+        n_state = len(state)
+        device_interval = list(self._on_device(tuple(interval)))
+        for i, index in enumerate(_INTERVAL_WRITTEN):
+            device_interval[index] = device[n_state + i]
+        if body is None:  # a fixed object: a placeholder the kernel does not read
+            body = tuple(np.zeros(n_grippers) for _ in range(14)) + (0.0, 0.0, 0.0, 0.0)
+        arguments = (tuple(device[:n_state]), self.rods, self.terms, self.solver,
+                     (self._on_device(tuple(geometry)), self.projection), self._on_device(tuple(body)),
+                     tuple(device_interval),
+                     (self._on_device(np.ascontiguousarray(gripper_water, dtype=float)),
+                      self._on_device(np.ascontiguousarray(first_steps, dtype=np.int64)), device[-1], float(dt),
+                      int(n_steps)))
+        return arguments, written, device
+
+    def advance(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, gripper_water: np.ndarray,
+                first_steps: np.ndarray, dt: float, n_steps: int) -> np.ndarray:
+        """Takes steps ``first_steps[b]`` … ``n_steps`` − 1 of ``dt`` [s] of every running gripper b, as
+        :func:`~.stepping.take_steps` takes them on the CPU, with the current ``gripper_water`` (n_steps + 1, B, 3)
+        [m/s]. ``state`` (:class:`~.stepping.WorkingState`'s fields) and ``interval`` (:class:`~.stepping.Interval`'s)
+        are the host's and are updated in place. Returns the step where each gripper stopped (B,): ``n_steps``, the
+        step after a failed one, or a step left ``pending`` for the host to halve."""
+        stops = np.zeros(first_steps.shape[0], dtype=np.int64)
+        arguments, written, device = self.arguments(state, geometry, body, interval, gripper_water, first_steps,
+                                                    stops, dt, n_steps)
+        _launch(grasp_kernel(self.shape), first_steps.shape[0], arguments, written, device)
+        return stops
+
+
+_INTERVAL_WRITTEN = (0, 4, 5, 6, 7, 8, 9, 10)
+"""The fields of :class:`~.stepping.Interval` the kernel writes: κ̄, running, failed, clock, Newton iterations, the
+two impulses, pending."""
+
+
+def grasp_ptx(constants: tuple, state: tuple, geometry: tuple, body: tuple | None, interval: tuple,
+              compute_capability: tuple[int, int] = (9, 0)) -> str:
+    """The PTX of the grasp kernel, compiled for ``compute_capability`` without a GPU: ``constants`` are
+    :class:`GpuGrasp`'s first arguments, the others :meth:`GpuGrasp.advance`'s (host arrays). A check that every
+    shared function compiles for the GPU."""
+    import_cuda()
+    gpu = GpuGrasp(*constants, host=True)
+    n_grippers = interval[4].shape[0]
+    arguments, _, _ = gpu.arguments(state, geometry, body, interval, np.zeros((2, n_grippers, 3)),
+                                    np.zeros(n_grippers, dtype=np.int64), np.zeros(n_grippers, dtype=np.int64),
+                                    1e-3, 1)
+    return _ptx(_build_grasp_kernel(constants[-1]), arguments, compute_capability)
+
+
+def _launch(kernel, n_grippers: int, arguments: tuple, host: list, device: list) -> None:
+    """Launches ``kernel`` with a thread per gripper and copies each array it writes back into its ``host`` array
+    (from its ``device`` copy; in the simulator they are the same arrays)."""
+    blocks = (n_grippers + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
+    with calls_kept_apart():  # (a kernel compiles at its first launch)
+        kernel[blocks, THREADS_PER_BLOCK](*arguments)
+    for array, on_device in zip(host, device, strict=True):
+        if not array.size or on_device is array:
+            continue
+        if isinstance(on_device, np.ndarray):  # the simulator's contiguous copy of a host array
+            array[...] = on_device
+        else:
+            on_device.copy_to_host(array)
 
 
 def rods_ptx(constants: tuple, state: tuple, n_grippers: int, compute_capability: tuple[int, int] = (9, 0)) -> str:
@@ -391,21 +665,26 @@ def rods_ptx(constants: tuple, state: tuple, n_grippers: int, compute_capability
     compiles for the GPU."""
     shape = constants[-1]
     import_cuda()
-    from numba import typeof
-    from numba.cuda import dispatcher
-
     gpu = GpuRods(*constants, host=True)
     R = n_grippers * shape.n_fingers
     arguments, _, _ = gpu.arguments(state, np.zeros((2, n_grippers, 3)), np.zeros(R), np.zeros(R), (-1.0, 1.0),
                                     np.ones(n_grippers, dtype=bool), np.zeros(n_grippers, dtype=bool),
                                     np.zeros(n_grippers), np.zeros(n_grippers, dtype=np.int64), 1e-3, 1)
+    return _ptx(_build_rods_kernel(shape), arguments, compute_capability)
+
+
+def _ptx(kernel, arguments: tuple, compute_capability: tuple[int, int]) -> str:
+    """The PTX of ``kernel`` for ``arguments``' types, compiled for ``compute_capability`` without a GPU."""
+    from numba import typeof
+    from numba.cuda import dispatcher
+
     signature = tuple(typeof(argument) for argument in arguments)
-    kernel = _build_rods_kernel(shape)
     # a device function is compiled for the current device's compute capability: without a device, the one asked for
     current = dispatcher.get_current_device
     dispatcher.get_current_device = lambda: _Device(compute_capability)
     try:
-        ptx, _ = cuda.compile_ptx(kernel.py_func, signature, cc=compute_capability)
+        with calls_kept_apart():
+            ptx, _ = cuda.compile_ptx(kernel.py_func, signature, cc=compute_capability)
     finally:
         dispatcher.get_current_device = current
     return ptx
@@ -416,4 +695,5 @@ class _Device(NamedTuple):
 
 
 __all__ = ["THREADS_PER_BLOCK", "INSTALL_HINT", "GpuUnavailable", "GpuUnsupported", "check_device", "import_cuda",
-           "cuda_module", "simulated", "RodsKernelShape", "rods_kernel", "GpuRods", "rods_ptx"]
+           "cuda_module", "simulated", "RodsKernelShape", "rods_kernel", "GpuRods", "rods_ptx", "GraspKernelShape",
+           "grasp_kernel", "GpuGrasp", "grasp_ptx"]
