@@ -3,11 +3,23 @@
     python -m benchmarks.gpu_speed --json out/gpu_speed.json [--plot out/gpu_speed.png] [--sizes 1024,4096,...]
     python -m benchmarks.gpu_speed --plot-only out/gpu_speed.json --plot docs/img/gpu_speed.png
 
-What it measures today is what the GPU back end runs today (:mod:`soft_gripper_env.physics.solvers.gpu`): the
-env's **fingers alone**, with nothing to grasp. Each gripper has the scene of one of the task's episodes (its
-gripper, water, current, Δt and Newton settings) without its specimen, and every control interval (``control_dt``,
-the task's substeps) takes a random natural-curvature rate per finger within the task's range, κ̄ kept within
-[−0.2, 0.2]: the physics of random actions, without the task.
+Two workloads (``--workloads``), each in both rod models:
+
+**grasp**: the env itself, ``SoftGripperUnderwaterVectorEnv(num_envs, device=...)`` (what ``gym.make_vec`` builds),
+driven by random actions and by the reactive controller (``agents.scripted.ReactivePolicy``), episodes resetting
+as they end:
+
+- **GPU speed** for each of ``--sizes`` envs: env steps per second over ``--steps`` actions after a first one (whose
+  time, less a later one's, is mostly the kernels' compile), and the share of that time spent in the physics
+  (``Simulator.advance``: copies to and from the device, the kernel, a halved step on the CPU) against the task's
+  own work on the host;
+- **the CPU anchor, in the same run**: ``make_vec(64)`` on one thread with the same controller, and the ratio of
+  each GPU figure to it.
+
+**fingers**: the env's **fingers alone**, with nothing to grasp, the ceiling of the physics. Each gripper has the
+scene of one of the task's episodes (its gripper, water, current, Δt and Newton settings) without its specimen, and
+every control interval (``control_dt``, the task's substeps) takes a random natural-curvature rate per finger
+within the task's range, κ̄ kept within [−0.2, 0.2]: the physics of random actions, without the task.
 
 - **agreement**: 8 grippers for ``--agreement-seconds`` (1 s) of such intervals on the CPU and on the GPU, from the
   same start with the same rates: the largest distance between any node's world positions at any interval's end
@@ -19,7 +31,8 @@ the task's substeps) takes a random natural-curvature rate per finger within the
 - **the CPU anchor, in the same run**: the same intervals on the CPU path for 64 grippers in one batch on one
   thread (the ``make_vec(64)`` layout), and the ratio of each GPU figure to it.
 
-Without a GPU (or numba-cuda) it says so and times nothing on the GPU.
+Without a GPU (or numba-cuda) it says so and times nothing on the GPU. The grasp workload needs Gymnasium (the
+``rl`` extra); without it, that workload records why it did not run.
 """
 
 from __future__ import annotations
@@ -153,13 +166,79 @@ def gpu_speed(model: str, size: int, n_intervals: int) -> dict:
     return result
 
 
+CONTROLLERS = ("random", "reactive")
+"""What drives the grasp workload: uniform random actions, or the reactive controller."""
+
+
+def grasp_speed(model: str, num_envs: int, steps: int, controller: str, device: str) -> dict:
+    """Env steps per second of the env's vector of ``num_envs`` on ``device`` over ``steps`` actions of
+    ``controller`` after a first action, and where the time goes: the physics (``Simulator.advance``) or the task."""
+    from agents.scripted import ReactivePolicy
+    from soft_gripper_env.env import SoftGripperUnderwaterVectorEnv
+
+    start = time.perf_counter()
+    env = SoftGripperUnderwaterVectorEnv(num_envs, model=model, device=device)
+    policy = ReactivePolicy(env.task) if controller == "reactive" else None
+    env.action_space.seed(0)
+    observation, _ = env.reset(seed=0)
+    setup = time.perf_counter() - start
+    batch = env._shards[0].batch
+    physics = [0.0]
+    advance = batch.sim.advance
+
+    def timed_advance(*args, **kwargs):
+        begin = time.perf_counter()
+        try:
+            return advance(*args, **kwargs)
+        finally:
+            physics[0] += time.perf_counter() - begin
+
+    batch.sim.advance = timed_advance  # the simulator is built at the first reset and kept while the kind holds
+
+    def act(observation):
+        return env.action_space.sample() if policy is None else policy(observation)
+
+    seconds, in_physics = [], []
+    ended = 0
+    for _ in range(steps + 1):
+        begin, physics_before = time.perf_counter(), physics[0]
+        observation, _, terminated, truncated, _ = env.step(act(observation))
+        seconds.append(time.perf_counter() - begin)
+        in_physics.append(physics[0] - physics_before)
+        ended += int(np.sum(terminated | truncated))
+    env.close()
+    first, timed = seconds[0], np.array(seconds[1:])
+    total = float(timed.sum())
+    return {"envs": num_envs, "controller": controller, "steps": steps, "setup_s": setup, "first_step_s": first,
+            "compile_s": float(first - timed.min()), "env_steps_per_s": num_envs * steps / total,
+            "physics_share": float(np.sum(in_physics[1:]) / total), "episodes_ended": ended}
+
+
 def plot(results: dict, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 4.8))
+    fig, (grasp_ax, ax) = plt.subplots(1, 2, figsize=(13, 4.8))
+    for model, color in (("planar", "tab:blue"), ("3d", "tab:red")):
+        grasp = results.get("models", {}).get(model, {}).get("grasp", {})
+        for controller, style in (("reactive", "o-"), ("random", "s--")):
+            runs = [g for g in grasp.get("gpu", []) if g["controller"] == controller]
+            if runs:
+                grasp_ax.plot([g["envs"] for g in runs], [g["env_steps_per_s"] for g in runs], style, color=color,
+                              label=f"{model}, {controller}: GPU")
+            anchor = grasp.get("cpu", {}).get(controller)
+            if anchor:
+                grasp_ax.axhline(anchor["env_steps_per_s"], color=color, ls=":" if controller == "reactive" else "-.",
+                                 lw=1, label=f"{model}, {controller}: CPU, make_vec({anchor['envs']}), one thread")
+    grasp_ax.set_xscale("log", base=2)
+    grasp_ax.set_yscale("log")
+    grasp_ax.set_xlabel("envs (grippers) stepped together")
+    grasp_ax.set_ylabel("env steps per second")
+    grasp_ax.set_title("grasping: the env's vector, GPU against the CPU in one run", fontsize=9)
+    grasp_ax.grid(True, which="both", alpha=0.3)
+    grasp_ax.legend(fontsize=7)
     for model, color in (("planar", "tab:blue"), ("3d", "tab:red")):
         each = results.get("models", {}).get(model)
         if not each or not each.get("gpu"):
@@ -192,6 +271,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plot-only", type=Path, help="draw the plot from this JSON file and stop")
     parser.add_argument("--sizes", default=",".join(str(s) for s in SIZES), help="grippers per GPU batch")
     parser.add_argument("--models", default="planar,3d", help="rod models, comma-separated")
+    parser.add_argument("--workloads", default="grasp,fingers", help="grasp, fingers or both, comma-separated")
+    parser.add_argument("--controllers", default=",".join(CONTROLLERS), help="the grasp workload's controllers")
+    parser.add_argument("--steps", type=int, default=20, help="timed env steps per size in the grasp workload")
     parser.add_argument("--intervals", type=int, default=5, help="timed control intervals per size (default 5)")
     parser.add_argument("--agreement-seconds", type=float, default=1.0, help="simulated time of the agreement run")
     args = parser.parse_args(argv)
@@ -205,6 +287,14 @@ def main(argv: list[str] | None = None) -> int:
     for model in models:
         if model not in ("planar", "3d"):
             parser.error(f"--models: {model!r} is not one of planar, 3d")
+    workloads = args.workloads.split(",")
+    if not workloads or any(w not in ("grasp", "fingers") for w in workloads):
+        parser.error(f"--workloads = {args.workloads!r}: each must be one of grasp, fingers")
+    controllers = args.controllers.split(",")
+    if not controllers or any(c not in CONTROLLERS for c in controllers):
+        parser.error(f"--controllers = {args.controllers!r}: each must be one of {', '.join(CONTROLLERS)}")
+    if args.steps < 1:
+        parser.error(f"--steps = {args.steps} must be at least 1")
     from soft_gripper_env.physics.solvers.gpu import GpuUnavailable, cuda_module
 
     results: dict = {"models": {}}
@@ -223,6 +313,29 @@ def main(argv: list[str] | None = None) -> int:
 
     for model in models:
         each = results["models"][model] = {}
+        if "grasp" in workloads:
+            grasp = each["grasp"] = {"cpu": {}, "gpu": []}
+            try:
+                import gymnasium  # noqa: F401
+            except ImportError as error:
+                grasp["error"] = f"the grasp workload needs Gymnasium (the rl extra): {error}"
+                print(grasp["error"], flush=True)
+            else:
+                for controller in controllers:
+                    print(f"{model}: grasping, {controller}, the CPU anchor, make_vec({CPU_BATCH}) ...", flush=True)
+                    grasp["cpu"][controller] = grasp_speed(model, CPU_BATCH, args.steps, controller, "cpu")
+                    print(f"  {grasp['cpu'][controller]}", flush=True)
+                    save()
+                for size in sizes if results["device"] is not None else ():
+                    for controller in controllers:
+                        print(f"{model}: grasping, {controller}, GPU, {size} envs ...", flush=True)
+                        figures = grasp_speed(model, size, args.steps, controller, "cuda")
+                        figures["vs_cpu"] = figures["env_steps_per_s"] / grasp["cpu"][controller]["env_steps_per_s"]
+                        grasp["gpu"].append(figures)
+                        print(f"  {figures}", flush=True)
+                        save()
+        if "fingers" not in workloads:
+            continue
         print(f"{model}: the CPU anchor ...", flush=True)
         each["cpu"] = cpu_anchor(model, args.intervals)
         print(f"  {each['cpu']}", flush=True)
