@@ -166,7 +166,7 @@ def correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, fre
         _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result, work)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result, work):
     """The corrector's loop; ``moving`` is None for a fixed object, else (bodies, their motion), and every branch
     on the body tests it, so that a fixed object's loop is compiled without them."""

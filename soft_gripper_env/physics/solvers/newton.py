@@ -246,7 +246,7 @@ def _nonzero_rows(s):
     return first, last
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def newton(q, step, rods, terms, solver, free, holds, coupling, solve, result, work):
     """Newton's method for the rods where ``solve`` (R,) is True, each gripper at once (see the module notes).
 
