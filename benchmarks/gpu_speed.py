@@ -236,7 +236,8 @@ def plot(results: dict, path: Path) -> None:
     grasp_ax.set_yscale("log")
     grasp_ax.set_xlabel("envs (grippers) stepped together")
     grasp_ax.set_ylabel("env steps per second")
-    grasp_ax.set_title("grasping: the env's vector, GPU against the CPU in one run", fontsize=9)
+    grasp_ax.set_title(results.get("device", "GPU") + ": grasping, the env's vector, GPU against the CPU in one run",
+                       fontsize=9)
     grasp_ax.grid(True, which="both", alpha=0.3)
     grasp_ax.legend(fontsize=7)
     for model, color in (("planar", "tab:blue"), ("3d", "tab:red")):

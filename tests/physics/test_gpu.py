@@ -219,6 +219,28 @@ def test_kernels_compile_to_ptx_for_sm_90():
             assert result[kernel]["entry"] == 1, (model, kernel)
 
 
+@pytest.mark.slow
+@needs_numba_cuda
+def test_gpu_speed_benchmark_runs_in_the_simulator(tmp_path):
+    """The benchmark a lent GPU runs, end to end on two envs in Numba's CUDA simulator (no speed is meant): both
+    workloads and controllers write their figures, the grasp runs end as the CPU's and the plot is drawn."""
+    out = tmp_path / "gpu_speed.json"
+    run = _python(f"""
+    from benchmarks.gpu_speed import main
+    main(["--models", "planar", "--sizes", "2", "--steps", "1", "--intervals", "1", "--agreement-seconds", "0.05",
+          "--json", "{out}", "--plot", "{tmp_path / 'gpu_speed.png'}"])
+    print("RESULT {{}}")
+    """, simulator=True)
+    _result(run)
+    planar = json.loads(out.read_text())["models"]["planar"]
+    grasp = planar["grasp"]
+    assert set(grasp["cpu"]) == {"random", "reactive"}
+    assert [(g["envs"], g["controller"]) for g in grasp["gpu"]] == [(2, "random"), (2, "reactive")]
+    assert all(g["env_steps_per_s"] > 0 and 0 < g["physics_share"] <= 1 for g in grasp["gpu"])
+    assert planar["agreement"]["max_position_difference_m"] == 0.0  # the simulator runs the CPU's code
+    assert (tmp_path / "gpu_speed.png").stat().st_size > 0
+
+
 def test_device_is_checked():
     scene = fingers_alone("planar", 1)[0][0]
     with pytest.raises(ValueError, match="device = 'tpu'"):
