@@ -162,8 +162,8 @@ def test_simulated_grasp_kernel_steps_exactly_as_the_cpu():
     assert sum(result[key] for key in result if key.endswith("/cuda/halved")) > 0  # some steps were halved
 
 
-# one rod model's kernels compiled to PTX for sm_90 without a GPU: the rods alone, and grasping a free and a fixed
-# object; printed as JSON with each one's seconds
+# kernels compiled to PTX for sm_90 without a GPU, named model/kind on the command line (kind: rods alone, or grasping
+# a free or a fixed object); printed as JSON with each one's seconds
 _PTX = """
 import json, sys, time
 from dataclasses import replace
@@ -174,24 +174,24 @@ from soft_gripper_env.physics import PAPER_BALL, Simulator
 from soft_gripper_env.physics.solvers.gpu import grasp_ptx, rods_ptx
 from soft_gripper_env.physics.solvers.stepping import Interval
 
-model = sys.argv[1]
 out = {}
-sim = Simulator(fingers_alone(model, 1)[0])
-work = sim._working_state(sim.initial_state(), copy=True)
-start = time.perf_counter()
-ptx = rods_ptx(sim.gpu_constants(), (work.q, work.velocity, work.acceleration, work.tangent, work.director,
-                                     work.reference_twist), 1)
-out["rods"] = {"target": ".target sm_90" in ptx, "entry": ptx.count(".entry"), "seconds": time.perf_counter() - start}
-free = task_episode(GraspTask(model=model), np.random.default_rng(0), {}).scene
-for name, scene in (("free", free), ("fixed", replace(free, grasped_object=PAPER_BALL))):
-    sim = Simulator(scene)
-    work = sim._working_state(sim.initial_state(), copy=True)
-    R, N = sim.n_rods, sim.disc.n_nodes
-    interval = Interval(np.zeros(R), np.zeros(R), -0.2, 0.0, np.ones(1, bool), np.zeros(1, bool), np.zeros(1),
-                        np.zeros(1, np.int64), np.zeros((R, N)), np.zeros((R, N, 3)), np.zeros(1, bool), True)
-    body = None if sim._body is None else sim._body.plain_arrays
+for name in sys.argv[1:]:
+    model, kind = name.split("/")
     start = time.perf_counter()
-    ptx = grasp_ptx(sim.gpu_constants(), tuple(work), sim._plain_geometry, body, tuple(interval))
+    if kind == "rods":
+        sim = Simulator(fingers_alone(model, 1)[0])
+        work = sim._working_state(sim.initial_state(), copy=True)
+        ptx = rods_ptx(sim.gpu_constants(), (work.q, work.velocity, work.acceleration, work.tangent, work.director,
+                                             work.reference_twist), 1)
+    else:
+        scene = task_episode(GraspTask(model=model), np.random.default_rng(0), {}).scene
+        sim = Simulator(scene if kind == "free" else replace(scene, grasped_object=PAPER_BALL))
+        work = sim._working_state(sim.initial_state(), copy=True)
+        R, N = sim.n_rods, sim.disc.n_nodes
+        interval = Interval(np.zeros(R), np.zeros(R), -0.2, 0.0, np.ones(1, bool), np.zeros(1, bool), np.zeros(1),
+                            np.zeros(1, np.int64), np.zeros((R, N)), np.zeros((R, N, 3)), np.zeros(1, bool), True)
+        body = None if sim._body is None else sim._body.plain_arrays
+        ptx = grasp_ptx(sim.gpu_constants(), tuple(work), sim._plain_geometry, body, tuple(interval))
     out[name] = {"target": ".target sm_90" in ptx, "entry": ptx.count(".entry"),
                  "seconds": time.perf_counter() - start}
 print("RESULT " + json.dumps(out))
@@ -201,22 +201,24 @@ print("RESULT " + json.dumps(out))
 @pytest.mark.slow
 @needs_numba_cuda
 def test_kernels_compile_to_ptx_for_sm_90():
-    """Every kernel, with every physics function it calls, compiles for an H100/H200 (sm_90) without a GPU from the
-    shared ``@njit`` source, in both rod models: the rods alone, and grasping a free and a fixed object. The check
-    that nothing on the GPU's path allocates or needs what the GPU lacks. The two models compile side by side, one
-    process each."""
+    """The kernels, with every physics function they call, compile for an H100/H200 (sm_90) without a GPU from the
+    shared ``@njit`` source: the check that nothing on the GPU's path allocates or needs what the GPU lacks. Three
+    kernels between them reach every shared function: grasping a free body in 3-D (the env's default: the 3-D
+    energies and frames, the coupled solve, the palm), and in the planar model grasping a fixed object (its holds,
+    the rubbing fingers' line search) and the rods alone (``step_gripper_rods``). Two processes side by side, about
+    a minute and a half on two cores."""
     env = dict(os.environ)
     env.pop("NUMBA_ENABLE_CUDASIM", None)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    runs = {model: subprocess.Popen([sys.executable, "-c", textwrap.dedent(_PTX), model], stdout=subprocess.PIPE,
-                                    stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
-            for model in ("planar", "3d")}
-    for model, run in runs.items():
+    shares = (["3d/free"], ["planar/fixed", "planar/rods"])
+    runs = [subprocess.Popen([sys.executable, "-c", textwrap.dedent(_PTX), *names], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT) for names in shares]
+    for names, run in zip(shares, runs, strict=True):
         stdout, stderr = run.communicate(timeout=1200)
         result = _result(subprocess.CompletedProcess(run.args, run.returncode, stdout, stderr))
-        for kernel in ("rods", "free", "fixed"):
-            assert result[kernel]["target"], (model, kernel)
-            assert result[kernel]["entry"] == 1, (model, kernel)
+        for name in names:
+            assert result[name]["target"], name
+            assert result[name]["entry"] == 1, name
 
 
 @pytest.mark.slow
