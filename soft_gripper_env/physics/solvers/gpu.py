@@ -200,7 +200,18 @@ class RodsKernelShape(NamedTuple):
     """Whether the fingers touch each other (the search and the penalty are compiled in)."""
 
 
-_KERNELS: dict[RodsKernelShape, object] = {}
+_KERNELS: dict[tuple, object] = {}
+"""Each kernel built, by its shape (:class:`RodsKernelShape` or :class:`GraspKernelShape`, whose types tell them
+apart): numba-cuda compiles it on its first launch and keeps it."""
+
+
+def _compiled(shape: tuple, build):
+    """The kernel ``build`` makes for ``shape``, built once."""
+    kernel = _KERNELS.get(shape)
+    if kernel is None:
+        cuda_module()
+        kernel = _KERNELS[shape] = build(shape)
+    return kernel
 
 
 def rods_kernel(shape: RodsKernelShape):
@@ -214,11 +225,7 @@ def rods_kernel(shape: RodsKernelShape):
     :class:`~.newton.SolverArrays`' fields (their per-rod arrays for one gripper's F rods);
     ``interval`` = (gripper water (K + 1, B, 3) [m/s], finger directions (F, 3), κ̄ (R,), rate (R,) [1/s], (low,
     high), running (B,) bool, failed (B,) bool, clock (B,) [s], Newton iterations (B,) int, (dt [s], steps K))."""
-    kernel = _KERNELS.get(shape)
-    if kernel is None:
-        cuda_module()
-        kernel = _KERNELS[shape] = _build_rods_kernel(shape)
-    return kernel
+    return _compiled(shape, _build_rods_kernel)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -363,38 +370,27 @@ class GpuRods:
                  shape: RodsKernelShape, host: bool = False) -> None:
         self.cuda = None if host else cuda_module()
         self.shape = shape
-        to_device = self._to_device
         design = rods[:N_DESIGN_FIELDS]
         fingers = design[5]
-        self.rods = tuple(to_device(x) for x in design[:5]) + (
-            (float(fingers[0]), float(fingers[1])) + tuple(to_device(x) for x in fingers[2:]),)
-        self.terms = tuple(to_device(x) for x in terms)
+        self.rods = _on_device(self.cuda, design[:5], False) + (
+            (float(fingers[0]), float(fingers[1])) + _on_device(self.cuda, fingers[2:], False),)
+        self.terms = _on_device(self.cuda, tuple(terms), False)
         solver_arrays = SolverArrays(*solver)
         one_gripper = solver_arrays._replace(tolerance_inverse=solver_arrays.tolerance_inverse[:shape.n_fingers],
                                              clamp_free=solver_arrays.clamp_free[:shape.n_fingers])
-        self.solver = tuple(to_device(x) if isinstance(x, np.ndarray) else x for x in one_gripper)
-        self.directions = to_device(np.ascontiguousarray(finger_directions, dtype=float))
-
-    def _to_device(self, array: np.ndarray, placeholder: bool = False):
-        """``array`` on the device (the simulator's threads, and a host-only instance, take the host's own). With
-        ``placeholder``, an empty array goes as one element of its dimensions: for state the kernel does not read
-        (the planar model's frames), where a size test decides nothing."""
-        array = np.ascontiguousarray(array)
-        if self.cuda is None or simulated(self.cuda):
-            return array
-        if placeholder and not array.size:
-            array = np.zeros((1,) * array.ndim, dtype=array.dtype)
-        return self.cuda.to_device(array)
+        self.solver = _on_device(self.cuda, tuple(one_gripper), False)
+        self.directions = _on_device(self.cuda, np.ascontiguousarray(finger_directions, dtype=float), False)
 
     def arguments(self, state: tuple, gripper_water: np.ndarray, natural_curvature: np.ndarray, rate: np.ndarray,
                   curvature_range: tuple[float, float], running: np.ndarray, failed: np.ndarray, clock: np.ndarray,
                   iterations: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, tuple, list]:
         """The kernel's arguments for :meth:`advance`'s, and the host arrays it updates with their device copies."""
         host = [*state, natural_curvature, running, failed, clock, iterations]
-        device = [self._to_device(x, placeholder=True) for x in host]
+        device = [_on_device(self.cuda, x) for x in host]
         n_state = len(state)
-        interval = (self._to_device(np.ascontiguousarray(gripper_water, dtype=float)), self.directions,
-                    device[n_state], self._to_device(np.ascontiguousarray(rate, dtype=float)),
+        interval = (_on_device(self.cuda, np.ascontiguousarray(gripper_water, dtype=float), False),
+                    self.directions,
+                    device[n_state], _on_device(self.cuda, np.ascontiguousarray(rate, dtype=float), False),
                     (float(curvature_range[0]), float(curvature_range[1])), *device[n_state + 1:],
                     (float(dt), int(n_steps)))
         arguments = (tuple(device[:n_state]), self.rods, self.terms, self.solver, interval)
@@ -440,14 +436,7 @@ def grasp_kernel(shape: GraspKernelShape):
     :class:`~..kernels.body.BodyArrays`' fields (a placeholder for a fixed object); ``interval`` the
     :class:`~.stepping.Interval`'s fields; ``timing`` = (gripper water (K + 1, B, 3) [m/s], each gripper's first
     step (B,) int, where each stopped (B,) int, written, dt [s], K)."""
-    kernel = _GRASP_KERNELS.get(shape)
-    if kernel is None:
-        cuda_module()
-        kernel = _GRASP_KERNELS[shape] = _build_grasp_kernel(shape)
-    return kernel
-
-
-_GRASP_KERNELS: dict[GraspKernelShape, object] = {}
+    return _compiled(shape, _build_grasp_kernel)
 
 
 def _build_grasp_kernel(shape: GraspKernelShape):
@@ -567,46 +556,33 @@ class GpuGrasp:
         self.cuda = None if host else cuda_module()
         self.shape = shape
         F = shape.n_fingers
-        self.rods = self._on_device(rods[:N_DESIGN_FIELDS])
-        self.terms = self._on_device(terms)
+        self.rods = _on_device(self.cuda, rods[:N_DESIGN_FIELDS])
+        self.terms = _on_device(self.cuda, terms)
         solver_arrays = SolverArrays(*solver)
         one_gripper = solver_arrays._replace(tolerance_inverse=solver_arrays.tolerance_inverse[:F],
                                              clamp_free=solver_arrays.clamp_free[:F])
-        self.solver = self._on_device(tuple(one_gripper))
-        self.projection = self._on_device(projection[:F])
-
-    def _on_device(self, value):
-        """``value`` with its arrays on the device, all the way down a tuple (the simulator's threads, and a host-only
-        instance, take the host's own); an empty array goes as one element of its dimensions, which the kernel
-        slices back to none."""
-        if isinstance(value, tuple):
-            return tuple(self._on_device(x) for x in value)
-        if not isinstance(value, np.ndarray):
-            return value
-        array = np.ascontiguousarray(value)
-        if self.cuda is None or simulated(self.cuda):
-            return array
-        if not array.size:
-            array = np.zeros((1,) * array.ndim, dtype=array.dtype)
-        return self.cuda.to_device(array)
+        self.solver = _on_device(self.cuda, tuple(one_gripper))
+        self.projection = _on_device(self.cuda, projection[:F])
 
     def arguments(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, gripper_water: np.ndarray,
                   first_steps: np.ndarray, stops: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, list, list]:
         """The kernel's arguments, and the host arrays it writes with their device copies."""
         n_grippers = first_steps.shape[0]
         written = [*state, *(interval[i] for i in _INTERVAL_WRITTEN), stops]
-        device = [self._on_device(x) for x in written]
+        device = [_on_device(self.cuda, x) for x in written]
         n_state = len(state)
-        device_interval = list(self._on_device(tuple(interval)))
-        for i, index in enumerate(_INTERVAL_WRITTEN):
-            device_interval[index] = device[n_state + i]
+        written_at = {index: device[n_state + i] for i, index in enumerate(_INTERVAL_WRITTEN)}
+        device_interval = [written_at[i] if i in written_at else _on_device(self.cuda, x)
+                           for i, x in enumerate(interval)]
         if body is None:  # a fixed object: a placeholder the kernel does not read
             body = tuple(np.zeros(n_grippers) for _ in range(14)) + (0.0, 0.0, 0.0, 0.0)
         arguments = (tuple(device[:n_state]), self.rods, self.terms, self.solver,
-                     (self._on_device(tuple(geometry)), self.projection), self._on_device(tuple(body)),
+                     (_on_device(self.cuda, tuple(geometry)), self.projection),
+                     _on_device(self.cuda, tuple(body)),
                      tuple(device_interval),
-                     (self._on_device(np.ascontiguousarray(gripper_water, dtype=float)),
-                      self._on_device(np.ascontiguousarray(first_steps, dtype=np.int64)), device[-1], float(dt),
+                     (_on_device(self.cuda, np.ascontiguousarray(gripper_water, dtype=float)),
+                      _on_device(self.cuda, np.ascontiguousarray(first_steps, dtype=np.int64)), device[-1],
+                      float(dt),
                       int(n_steps)))
         return arguments, written, device
 
@@ -641,6 +617,23 @@ def grasp_ptx(constants: tuple, state: tuple, geometry: tuple, body: tuple | Non
                                     np.zeros(n_grippers, dtype=np.int64), np.zeros(n_grippers, dtype=np.int64),
                                     1e-3, 1)
     return _ptx(_build_grasp_kernel(constants[-1]), arguments, compute_capability)
+
+
+def _on_device(cuda, value, placeholder: bool = True):
+    """``value`` with its arrays on the device, all the way down a tuple; other values as they are. The simulator's
+    threads, and a host-only stepper (``cuda`` None), take the host's own arrays. With ``placeholder``, an empty
+    array goes as one element of its dimensions (a size the kernel slices back to none, or state it does not read,
+    such as the planar model's frames)."""
+    if isinstance(value, tuple):
+        return tuple(_on_device(cuda, x, placeholder) for x in value)
+    if not isinstance(value, np.ndarray):
+        return value
+    array = np.ascontiguousarray(value)
+    if cuda is None or simulated(cuda):
+        return array
+    if placeholder and not array.size:
+        array = np.zeros((1,) * array.ndim, dtype=array.dtype)
+    return cuda.to_device(array)
 
 
 def _launch(kernel, n_grippers: int, arguments: tuple, host: list, device: list) -> None:
