@@ -640,8 +640,11 @@ def _launch(kernel, n_grippers: int, arguments: tuple, host: list, device: list)
     """Launches ``kernel`` with a thread per gripper and copies each array it writes back into its ``host`` array
     (from its ``device`` copy; in the simulator they are the same arrays)."""
     blocks = (n_grippers + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
-    with calls_kept_apart():  # (a kernel compiles at its first launch)
+    if getattr(kernel, "overloads", None):  # compiled (at its first launch): no scan of the modules per action
         kernel[blocks, THREADS_PER_BLOCK](*arguments)
+    else:
+        with calls_kept_apart():
+            kernel[blocks, THREADS_PER_BLOCK](*arguments)
     for array, on_device in zip(host, device, strict=True):
         if not array.size or on_device is array:
             continue
