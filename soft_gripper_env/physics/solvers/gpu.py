@@ -434,8 +434,8 @@ def grasp_kernel(shape: GraspKernelShape):
     the :class:`~.newton.SolverArrays`' fields for one gripper's F rods; ``geometry`` = (the
     :class:`~.corrector.ContactGeometry`'s fields, the projection (F, D, 3)); ``body`` the
     :class:`~..kernels.body.BodyArrays`' fields (a placeholder for a fixed object); ``interval`` the
-    :class:`~.stepping.Interval`'s fields; ``timing`` = (gripper water (K + 1, B, 3) [m/s], each gripper's first
-    step (B,) int, where each stopped (B,) int, written, dt [s], K)."""
+    :class:`~.stepping.Interval`'s fields; ``timing`` = (gripper water (B, K + 1, 1, 3) [m/s], each gripper's
+    first step (B,) int, where each stopped (B,) int, written, dt [s], K)."""
     return _compiled(shape, _build_grasp_kernel)
 
 
@@ -537,7 +537,7 @@ def _build_grasp_kernel(shape: GraspKernelShape):
                         counts[1], counts[2], ratios[2], cuda.local.array((F, n), float64),
                         cuda.local.array((F, N, 3), float64), cuda.local.array((F, N), float64),
                         cuda.local.array(1, boolean), cuda.local.array(1, int64), gripper, corrector)
-        stops[b] = step_batch(first_steps[b], n_steps, dt, gripper_water[:, b:b + 1], own, rods, terms, solver,
+        stops[b] = step_batch(first_steps[b], n_steps, dt, gripper_water[b], own, rods, terms, solver,
                               own_geometry, projection, own_body, own_interval, work)
 
     return grasp_interval
@@ -580,7 +580,7 @@ class GpuGrasp:
                      (_on_device(self.cuda, tuple(geometry)), self.projection),
                      _on_device(self.cuda, tuple(body)),
                      tuple(device_interval),
-                     (_on_device(self.cuda, np.ascontiguousarray(gripper_water, dtype=float)),
+                     (_on_device(self.cuda, _per_gripper(gripper_water)),
                       _on_device(self.cuda, np.ascontiguousarray(first_steps, dtype=np.int64)), device[-1],
                       float(dt),
                       int(n_steps)))
@@ -617,6 +617,13 @@ def grasp_ptx(constants: tuple, state: tuple, geometry: tuple, body: tuple | Non
                                     np.zeros(n_grippers, dtype=np.int64), np.zeros(n_grippers, dtype=np.int64),
                                     1e-3, 1)
     return _ptx(_build_grasp_kernel(constants[-1]), arguments, compute_capability)
+
+
+def _per_gripper(gripper_water: np.ndarray) -> np.ndarray:
+    """The current at every gripper (K + 1, B, 3) [m/s] as the grasp kernel takes it, (B, K + 1, 1, 3): each thread's
+    own (K + 1, 1, 3) is then contiguous, as the CPU's whole batch is. A strided one would be another type, another
+    specialisation of :func:`~.stepping.step_batch` to compile for the simulator's threads (about 50 s each)."""
+    return np.ascontiguousarray(np.asarray(gripper_water, dtype=float).transpose(1, 0, 2)[:, :, None, :])
 
 
 def _on_device(cuda, value, placeholder: bool = True):

@@ -1,0 +1,495 @@
+"""Grasp outcomes against the physics step Δt: whether each rod model's outcomes have converged, against the chaos
+floor that no step size removes.
+
+    python -m benchmarks.outcome_convergence [--models 3d,planar] [--controllers reactive,ramp,pretrained]
+        [--dts 3d=0.01,...;planar=...] [--episodes 400] [--seed 3000000] [--workers 2] [--stop-after MINUTES]
+        [--runs out/outcome_convergence_runs] [--json out/outcome_convergence.json]
+        [--plot out/outcome_convergence.png] [--time]
+
+For each model, controller and Δt (halved from 10 ms: :data:`DEFAULT_DTS`) it runs the env's own task on
+``--episodes`` seeds from ``--seed`` (3,000,000 by default: seeds no controller or policy was tuned or trained on),
+all other settings at the model's defaults. Each condition runs twice: as it is, and with the sphere's start moved by
+:data:`PERTURBATION_M` (1 nm along x, ``GraspTask.start_point``), a change far below any physical scale. How often
+the two runs' success labels agree is the **chaos floor** at that Δt: the agreement no step size can beat.
+
+Per condition the study reports the success rate with its 95 % (Wilson) interval, the endings, and the peak-force
+and final-position distributions; against the finest Δt, seed by seed, how often the success labels agree and how far
+apart the sphere ends (median and 90th percentile); and the tests of :func:`converged`, which say whether a Δt's
+outcomes are those of the finest Δt within sampling error.
+
+**In pieces.** The episodes run in pieces of :data:`PIECE` seeds, ``--workers`` processes at a time, each kept in
+``--runs`` as it finishes (with the task it ran and a fingerprint of the code that ran it). A later call takes every
+kept piece whose task and code are today's, so an interrupted study resumes where it stopped, and ``--stop-after``
+ends a call after so many minutes (pieces under way finish). The summary is written from the conditions whose
+pieces are all there; where the finest Δt is not there yet, the finest one that is stands in as the reference, and
+the JSON says so (``reference_dt_s``). ``--time`` also times one env per model and Δt under the reactive controller
+against Gymnasium's ``Ant-v5`` in the same run, for the cost side of each Δt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ._timing import save_plot
+
+MODELS = ("3d", "planar")
+CONTROLLERS = ("reactive", "ramp", "pretrained")
+DEFAULT_DTS = {"3d": (0.01, 0.005, 0.0025, 0.00125, 0.000625, 0.0003125),
+               "planar": (0.01, 0.005, 0.0025, 0.00125, 0.000625)}
+"""Each model's physics steps [s], halved from 10 ms down to the finest, which is the reference."""
+FIRST_SEED = 3_000_000
+"""The study's first seed: above every range that tuned or trained a controller, and apart from the evaluation's
+held-out sets (1,000,000 and 2,000,000 onwards)."""
+PERTURBATION_M = 1e-9
+"""How far the perturbed run moves the sphere's start [m], along x: far below any physical scale of the task (the
+fingers' radius is millimetres, Newton's tolerance moves nodes by more)."""
+PIECE = 80
+"""Seeds per piece: five batches of the evaluation's 16 envs, about a minute of one core in 3-D at 2.5 ms."""
+SIGNIFICANCE = 0.05
+"""A test passes where its p-value is above this."""
+FLOOR_MARGIN = 0.02
+"""A Δt's label agreement with the finest Δt may fall this far (2 points) below the chaos floor."""
+CODE = ("soft_gripper_env", "agents/scripted.py", "agents/evaluate.py", "agents/pretrained")
+"""What a piece's outcomes depend on, fingerprinted (:func:`code_fingerprint`): a kept piece is taken only if none
+of it has changed since. The GPU back end's own module is left out: the study runs on the CPU, which never runs
+it."""
+NOT_RUN = ("soft_gripper_env/physics/solvers/gpu.py",)
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@dataclass(frozen=True)
+class Piece:
+    """Episodes on seeds ``first_seed`` … ``first_seed + episodes − 1`` of one condition."""
+
+    model: str
+    controller: str
+    dt: float
+    perturbed: bool
+    first_seed: int
+    episodes: int
+
+    @property
+    def condition(self) -> tuple[str, str, float, bool]:
+        return self.model, self.controller, self.dt, self.perturbed
+
+    def file_name(self) -> str:
+        variant = "perturbed" if self.perturbed else "base"
+        return f"{self.model}_{self.controller}_dt{self.dt:.7f}_{variant}_{self.first_seed}_{self.episodes}.json"
+
+
+def code_fingerprint() -> str:
+    """A SHA-256 of the source (and the shipped policy) that decide an episode's outcome (:data:`CODE`)."""
+    digest = hashlib.sha256()
+    for entry in CODE:
+        path = ROOT / entry
+        files = sorted(p for p in path.rglob("*") if p.is_file() and p.suffix in (".py", ".zip", ".pkl", ".json")) \
+            if path.is_dir() else [path]
+        for file in files:
+            if str(file.relative_to(ROOT)) in NOT_RUN:
+                continue
+            digest.update(str(file.relative_to(ROOT)).encode())
+            digest.update(file.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def task_settings(piece: Piece) -> dict:
+    """The :class:`~soft_gripper_env.grasp_task.GraspTask` fields a piece runs with: the model's defaults but for
+    Δt, the perturbed start, and a trained policy's own observation and closing reflexes (its config.json)."""
+    from agents.evaluate import PRETRAINED, REFLEXES, trained_task
+    from soft_gripper_env.grasp_task import GraspTask
+
+    settings = {"model": piece.model, "physics_dt": piece.dt}
+    if piece.perturbed:
+        x, y, z = GraspTask.start_point
+        settings["start_point"] = (x + PERTURBATION_M, y, z)
+    if piece.controller == "pretrained":
+        trained = trained_task(PRETRAINED)
+        settings.update({name: trained.get(name) for name in REFLEXES}, observation=trained.get("observation", "full"))
+    return settings
+
+
+def run_piece(piece: Piece) -> dict:
+    """Runs one piece (in a worker process): per seed its success, ending, peak finger force [N] and the sphere's
+    final offset from the grasp point [m], with the task it ran."""
+    from agents.evaluate import evaluate, make_policy
+    from soft_gripper_env.grasp_task import GraspTask
+
+    settings = task_settings(piece)
+    task = GraspTask(**settings)
+    policy = make_policy(piece.controller, task, piece.first_seed)
+    result = evaluate(policy, piece.episodes, piece.first_seed, progress=False, **settings)
+    return {"piece": asdict(piece), "task": repr(task), "successes": result["successes"],
+            "endings": result["episode_endings"], "peak_forces_N": result["peak_contact_forces_N"],
+            "final_offsets_m": result["final_object_offsets"], "seconds": result["seconds"]}
+
+
+def plan(models: list[str], controllers: list[str], dts: dict[str, tuple[float, ...]], episodes: int,
+         seed: int) -> list[Piece]:
+    """Every piece of the study, in the order they run: by controller, model, Δt from coarse to fine (the cheap
+    first), the unperturbed run before the perturbed one."""
+    return [Piece(model, controller, dt, perturbed, first, min(PIECE, seed + episodes - first))
+            for controller in controllers for model in models for dt in sorted(dts[model], reverse=True)
+            for perturbed in (False, True) for first in range(seed, seed + episodes, PIECE)]
+
+
+def kept_piece(runs: Path, piece: Piece, fingerprint: str) -> dict | None:
+    """The piece's kept result if it ran the same task with today's code, else None."""
+    from soft_gripper_env.grasp_task import GraspTask
+
+    path = runs / piece.file_name()
+    if not path.exists():
+        return None
+    kept = json.loads(path.read_text())
+    same = kept.get("code") == fingerprint and kept.get("task") == repr(GraspTask(**task_settings(piece)))
+    return kept if same else None
+
+
+def run_study(pieces: list[Piece], runs: Path, workers: int, stop_after_s: float = math.inf) -> dict[Piece, dict]:
+    """Every piece's result: kept ones from ``runs``, the others run ``workers`` at a time and kept there as each
+    finishes; no piece starts after ``stop_after_s`` seconds. Returns the pieces that are there."""
+    runs.mkdir(parents=True, exist_ok=True)
+    fingerprint = code_fingerprint()
+    results = {piece: kept for piece in pieces if (kept := kept_piece(runs, piece, fingerprint)) is not None}
+    missing = [piece for piece in pieces if piece not in results]
+    print(f"{len(results)} of {len(pieces)} pieces kept from earlier calls; {len(missing)} to run, {workers} at a "
+          f"time (code {fingerprint})", flush=True)
+    if not missing:
+        return results
+    start = time.monotonic()
+    with ProcessPoolExecutor(workers) as pool, \
+            tqdm(total=sum(p.episodes for p in missing), desc="episodes", unit="episode", file=sys.stdout) as bar:
+        queue = iter(missing)
+        running = {}
+
+        def submit() -> None:
+            if time.monotonic() - start < stop_after_s and (piece := next(queue, None)) is not None:
+                running[pool.submit(run_piece, piece)] = piece
+
+        for _ in range(workers):
+            submit()
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                piece = running.pop(future)
+                result = {**future.result(), "code": fingerprint}
+                (runs / piece.file_name()).write_text(json.dumps(result))
+                results[piece] = result
+                bar.update(piece.episodes)
+                bar.write(f"  {piece.model} {piece.controller} Δt {1e3 * piece.dt:g} ms"
+                          f"{' perturbed' if piece.perturbed else ''}, seeds {piece.first_seed}+{piece.episodes}: "
+                          f"success {np.mean(result['successes']):.2f}, {result['seconds']:.0f} s")
+                submit()
+    if len(results) < len(pieces):
+        print(f"stopped after {(time.monotonic() - start) / 60:.0f} min with {len(pieces) - len(results)} pieces "
+              "to run: call again to go on", flush=True)
+    return results
+
+
+def conditions(results: dict[Piece, dict], pieces: list[Piece]) -> dict[tuple, dict]:
+    """Each condition whose pieces are all there, its pieces' results joined in seed order."""
+    by_condition: dict[tuple, list[Piece]] = {}
+    for piece in pieces:
+        by_condition.setdefault(piece.condition, []).append(piece)
+    joined = {}
+    for condition, members in by_condition.items():
+        if all(piece in results for piece in members):
+            members = sorted(members, key=lambda p: p.first_seed)
+            joined[condition] = {key: [x for piece in members for x in results[piece][key]]
+                                 for key in ("successes", "endings", "peak_forces_N", "final_offsets_m")}
+    return joined
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """The 95 % Wilson score interval of a success rate."""
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def two_proportion_p(successes_a: int, n_a: int, successes_b: int, n_b: int) -> float:
+    """Two-sided p-value of the two-proportion z-test (pooled) that two success rates are equal."""
+    from scipy.stats import norm
+
+    pooled = (successes_a + successes_b) / (n_a + n_b)
+    spread = math.sqrt(pooled * (1 - pooled) * (1 / n_a + 1 / n_b))
+    if spread == 0.0:
+        return 1.0
+    return float(2 * norm.sf(abs(successes_a / n_a - successes_b / n_b) / spread))
+
+
+def endings_p(endings_a: list[str], endings_b: list[str]) -> float:
+    """p-value of the χ² test that two runs' endings come from one distribution (endings neither run had left
+    out; 1 where both runs end one way only)."""
+    from scipy.stats import chi2_contingency
+
+    kinds = sorted(set(endings_a) | set(endings_b))
+    if len(kinds) < 2:
+        return 1.0
+    table = [[endings.count(kind) for kind in kinds] for endings in (endings_a, endings_b)]
+    return float(chi2_contingency(table, correction=False).pvalue)
+
+
+def ks_p(a, b) -> float:
+    """p-value of the two-sample Kolmogorov–Smirnov test that ``a`` and ``b`` come from one distribution."""
+    from scipy.stats import ks_2samp
+
+    return float(ks_2samp(a, b).pvalue)
+
+
+def agreement(a: dict, b: dict) -> dict:
+    """Two runs on the same seeds, seed by seed: the share of equal success labels, and the median and 90th
+    percentile of the distance between the sphere's final places [m]."""
+    gap = np.linalg.norm(np.subtract(a["final_offsets_m"], b["final_offsets_m"]), axis=1)
+    return {"label_agreement": float(np.mean(np.equal(a["successes"], b["successes"]))),
+            "median_position_gap_m": float(np.median(gap)), "p90_position_gap_m": float(np.percentile(gap, 90))}
+
+
+def describe(run: dict) -> dict:
+    """One run's outcome statistics: success rate and interval, endings, peak force and final distance from the
+    grasp point."""
+    n = len(run["successes"])
+    successes = int(np.sum(run["successes"]))
+    distance = np.linalg.norm(run["final_offsets_m"], axis=1)
+    peaks = np.asarray(run["peak_forces_N"])
+    return {"episodes": n, "success_rate": successes / n, "success_interval_95": wilson_interval(successes, n),
+            "endings": {kind: run["endings"].count(kind) for kind in sorted(set(run["endings"]))},
+            "mean_peak_force_N": float(peaks.mean()), "median_peak_force_N": float(np.median(peaks)),
+            "median_final_distance_m": float(np.median(distance)),
+            "p90_final_distance_m": float(np.percentile(distance, 90))}
+
+
+def converged(run: dict, reference: dict, floor: float) -> dict:
+    """Whether ``run``'s outcomes are ``reference``'s (the finest Δt's) within sampling error, on the same seeds:
+
+    - success rate: two-proportion z-test, p > :data:`SIGNIFICANCE`;
+    - endings: χ² test on the counts of each ending, p > :data:`SIGNIFICANCE`;
+    - peak finger force and the sphere's final distance from the grasp point: two-sample Kolmogorov–Smirnov tests,
+      p > :data:`SIGNIFICANCE`;
+    - per-seed success labels: agreement with the reference at least the chaos ``floor`` (the reference's agreement
+      with its own perturbed run) less :data:`FLOOR_MARGIN`.
+
+    Returns each test's value and ``passes``, all of them."""
+    n, m = len(run["successes"]), len(reference["successes"])
+    tests = {"success_p": two_proportion_p(int(np.sum(run["successes"])), n, int(np.sum(reference["successes"])), m),
+             "endings_p": endings_p(run["endings"], reference["endings"]),
+             "peak_force_ks_p": ks_p(run["peak_forces_N"], reference["peak_forces_N"]),
+             "final_distance_ks_p": ks_p(np.linalg.norm(run["final_offsets_m"], axis=1),
+                                         np.linalg.norm(reference["final_offsets_m"], axis=1)),
+             **agreement(run, reference), "floor": floor}
+    tests["passes"] = bool(all(tests[key] > SIGNIFICANCE for key in ("success_p", "endings_p", "peak_force_ks_p",
+                                                                      "final_distance_ks_p"))
+                           and tests["label_agreement"] >= floor - FLOOR_MARGIN)
+    return tests
+
+
+def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[str],
+              dts: dict[str, tuple[float, ...]], episodes: int, seed: int) -> dict:
+    """The study's summary from the complete conditions ``joined`` (:func:`conditions`); prints its table."""
+    summary = {"episodes": episodes, "first_seed": seed, "perturbation_m": PERTURBATION_M,
+               "significance": SIGNIFICANCE, "floor_margin": FLOOR_MARGIN, "code": code_fingerprint(), "models": {}}
+    print("\n| model | controller | Δt [ms] | success (95 % interval) | labels agree with the finest | floor at this "
+          "Δt | median gap [mm] | success p | endings p | peak-force KS p | final-distance KS p | converged |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for model in models:
+        summary["models"][model] = {}
+        for controller in controllers:
+            there = [dt for dt in sorted(dts[model]) if (model, controller, dt, False) in joined
+                     and (model, controller, dt, True) in joined]
+            if not there:
+                continue
+            reference_dt = there[0]
+            reference = joined[(model, controller, reference_dt, False)]
+            floor = agreement(reference, joined[(model, controller, reference_dt, True)])["label_agreement"]
+            rows = {}
+            for dt in there:
+                run = joined[(model, controller, dt, False)]
+                perturbed = agreement(run, joined[(model, controller, dt, True)])
+                row = {**describe(run), "chaos_floor": perturbed,
+                       "against_reference": None if dt == reference_dt else converged(run, reference, floor)}
+                rows[f"{dt:g}"] = row
+                test = row["against_reference"]
+                low, high = row["success_interval_95"]
+                print(f"| {model} | {controller} | {1e3 * dt:g} | {row['success_rate']:.3f} ({low:.3f}–{high:.3f}) | "
+                      + ("reference |" if test is None else f"{test['label_agreement']:.3f} |")
+                      + f" {perturbed['label_agreement']:.3f} | "
+                      + ("— | — | — | — | — | — |" if test is None else
+                         f"{1e3 * test['median_position_gap_m']:.2f} | {test['success_p']:.2f} | "
+                         f"{test['endings_p']:.2f} | {test['peak_force_ks_p']:.2f} | "
+                         f"{test['final_distance_ks_p']:.2f} | {'yes' if test['passes'] else 'no'} |"))
+            finest = min(dts[model])
+            if reference_dt != finest:
+                print(f"  ({model}, {controller}: Δt = {1e3 * finest:g} ms is not there yet; "
+                      f"{1e3 * reference_dt:g} ms stands in as the reference)")
+            passing = [float(dt) for dt in rows if rows[dt]["against_reference"] is not None
+                       and rows[dt]["against_reference"]["passes"]]
+            summary["models"][model][controller] = {
+                "reference_dt_s": reference_dt, "finest_dt_s": finest, "dts": rows,
+                "largest_converged_dt_s": largest_converged(rows, reference_dt) if passing else None}
+    return summary
+
+
+def largest_converged(rows: dict, reference_dt: float) -> float:
+    """The largest Δt that passes with every finer Δt passing too (an outlier that passes above a failing Δt does
+    not count)."""
+    largest = reference_dt
+    for key in sorted(rows, key=float):
+        test = rows[key]["against_reference"]
+        if test is None:
+            continue
+        if not test["passes"]:
+            break
+        largest = float(key)
+    return largest
+
+
+def time_dts(models: list[str], dts: dict[str, tuple[float, ...]], seed: int, steps: int = 240,
+             repeats: int = 3) -> dict:
+    """One env's steps per second under the reactive controller per model and Δt (the best of ``repeats`` over
+    ``steps`` actions from ``seed``), and Ant-v5's in the same run."""
+    import gymnasium as gym
+
+    import soft_gripper_env
+    from agents.scripted import ReactivePolicy
+    from benchmarks.env_speed import steps_per_second, time_ant
+    from soft_gripper_env.grasp_task import GraspTask
+
+    def once(model: str, dt: float) -> float:
+        env = gym.make(soft_gripper_env.ENV_ID, model=model, physics_dt=dt)
+        return steps_per_second(env, steps, ReactivePolicy(GraspTask(model=model, physics_dt=dt)), seed)
+
+    timing = {"ant_v5_steps_per_s": max(time_ant() for _ in range(repeats)), "env_steps_per_s": {}}
+    for model in models:
+        once(model, max(dts[model]))  # compiles or loads the kernels
+        timing["env_steps_per_s"][model] = {f"{dt:g}": max(once(model, dt) for _ in range(repeats))
+                                            for dt in tqdm(dts[model], desc=f"timing {model}", file=sys.stdout)}
+    return timing
+
+
+def plot(summary: dict, path: Path) -> None:
+    """Per model (a row): the success rate and its interval against Δt, the label agreement with the finest Δt
+    beside the chaos floor, and the sphere's median final gap to the finest Δt beside the floor's; a filled marker
+    where a Δt passes :func:`converged`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    models = [m for m in summary["models"] if summary["models"][m]]
+    fig, axes = plt.subplots(len(models), 3, figsize=(15, 4.2 * len(models)), squeeze=False)
+    colours = dict(zip(CONTROLLERS, ("tab:blue", "tab:orange", "tab:green"), strict=True))
+    for row, model in enumerate(models):
+        success, agree, gap = axes[row]
+        for controller, study in summary["models"][model].items():
+            rows = study["dts"]
+            dt = np.array([float(k) for k in rows]) * 1e3
+            colour = colours.get(controller, "k")
+            rate = np.array([rows[k]["success_rate"] for k in rows])
+            interval = np.array([rows[k]["success_interval_95"] for k in rows])
+            success.errorbar(dt, rate, yerr=[rate - interval[:, 0], interval[:, 1] - rate], color=colour,
+                             marker="o", capsize=3, label=controller)
+            tested = [k for k in rows if rows[k]["against_reference"] is not None]
+            t = np.array([float(k) for k in tested]) * 1e3
+            passes = np.array([rows[k]["against_reference"]["passes"] for k in tested], dtype=bool)
+            for axis, key, floor_key, scale in ((agree, "label_agreement", "label_agreement", 1.0),
+                                                (gap, "median_position_gap_m", "median_position_gap_m", 1e3)):
+                values = np.array([rows[k]["against_reference"][key] for k in tested]) * scale
+                axis.plot(t, values, color=colour, label=f"{controller}: against {1e3 * study['reference_dt_s']:g} ms")
+                axis.scatter(t[passes], values[passes], color=colour, zorder=3)
+                axis.scatter(t[~passes], values[~passes], facecolors="white", edgecolors=colour, zorder=3)
+                axis.plot(dt, [rows[k]["chaos_floor"][floor_key] * scale for k in rows], color=colour,
+                          linestyle="--", marker="x", label=f"{controller}: chaos floor (start moved 1 nm)")
+        success.set(ylabel="success rate (95 % interval)", title=f"{model}: success against Δt")
+        agree.set(ylabel="share of seeds with the same label", title=f"{model}: labels against the finest Δt")
+        gap.set(ylabel="median gap of the sphere's final place [mm]", yscale="log",
+                title=f"{model}: final place against the finest Δt")
+        steps = sorted({1e3 * float(k) for study in summary["models"][model].values() for k in study["dts"]})
+        for axis in axes[row]:
+            axis.set(xscale="log", xlabel="physics step Δt [ms]")
+            axis.set_xticks(steps, [f"{dt:g}" for dt in steps])
+            axis.minorticks_off()
+            axis.grid(True, alpha=0.3)
+        success.legend(fontsize=8)
+        agree.legend(fontsize=7)
+    fig.suptitle(f"Grasp outcomes against Δt, {summary['episodes']} seeds from {summary['first_seed']} "
+                 "(filled: converged by every test; open: not)")
+    save_plot(fig, path)
+    plt.close(fig)
+
+
+def parse_dts(text: str | None, models: list[str]) -> dict[str, tuple[float, ...]]:
+    """``--dts``: "3d=0.01,0.005;planar=0.01" (a model not named keeps :data:`DEFAULT_DTS`)."""
+    dts = {model: DEFAULT_DTS[model] for model in models}
+    if text:
+        for part in text.split(";"):
+            model, _, values = part.partition("=")
+            if model.strip() not in dts:
+                raise ValueError(f"--dts names model {model.strip()!r}, not one of --models {models}")
+            steps = tuple(float(v) for v in values.split(","))
+            if len(steps) < 2 or any(not 0.0 < dt <= 0.02 for dt in steps):
+                raise ValueError(f"--dts for {model.strip()}: at least two steps, each in (0, 0.02] s, got {steps}")
+            dts[model.strip()] = steps
+    return dts
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--models", default=",".join(MODELS), help="comma-separated, of 3d, planar (default both)")
+    parser.add_argument("--controllers", default=",".join(CONTROLLERS),
+                        help="comma-separated, of reactive, ramp, pretrained (default all three)")
+    parser.add_argument("--dts", help="steps [s] per model, e.g. '3d=0.01,0.005;planar=0.01,0.005' "
+                                      "(default: halved from 0.01 to 0.0003125 s in 3-D, to 0.000625 s planar)")
+    parser.add_argument("--episodes", type=int, default=400, help="seeds per condition (default 400)")
+    parser.add_argument("--seed", type=int, default=FIRST_SEED, help=f"the first seed (default {FIRST_SEED})")
+    parser.add_argument("--workers", type=int, default=2, help="processes running pieces (default 2)")
+    parser.add_argument("--stop-after", type=float, default=math.inf, metavar="MINUTES",
+                        help="start no piece after this many minutes (default: run them all)")
+    parser.add_argument("--runs", type=Path, default=Path("out") / "outcome_convergence_runs",
+                        help="where each finished piece is kept (default out/outcome_convergence_runs)")
+    parser.add_argument("--json", type=Path, default=Path("out") / "outcome_convergence.json")
+    parser.add_argument("--plot", type=Path, default=Path("out") / "outcome_convergence.png")
+    parser.add_argument("--time", action="store_true", help="also time each model and Δt against Ant-v5")
+    args = parser.parse_args(argv)
+    models = [m.strip() for m in args.models.split(",") if m.strip()]
+    controllers = [c.strip() for c in args.controllers.split(",") if c.strip()]
+    if not models or any(m not in MODELS for m in models):
+        parser.error(f"--models = {args.models!r}: each must be one of {', '.join(MODELS)}")
+    if not controllers or any(c not in CONTROLLERS for c in controllers):
+        parser.error(f"--controllers = {args.controllers!r}: each must be one of {', '.join(CONTROLLERS)}")
+    if args.episodes < 2:
+        parser.error(f"--episodes = {args.episodes} must be at least 2")
+    if args.workers < 1:
+        parser.error(f"--workers = {args.workers} must be at least 1")
+    if not args.stop_after > 0:
+        parser.error(f"--stop-after = {args.stop_after} must be a positive number of minutes")
+    try:
+        dts = parse_dts(args.dts, models)
+    except ValueError as error:
+        parser.error(str(error))
+    pieces = plan(models, controllers, dts, args.episodes, args.seed)
+    results = run_study(pieces, args.runs, args.workers, 60 * args.stop_after)
+    summary = summarize(conditions(results, pieces), models, controllers, dts, args.episodes, args.seed)
+    summary["complete"] = len(results) == len(pieces)
+    if args.time:
+        summary["timing"] = time_dts(models, dts, args.seed)
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(summary, indent=1))
+    print(f"wrote {args.json}")
+    if any(summary["models"].values()):
+        plot(summary, args.plot)
+    return summary
+
+
+if __name__ == "__main__":
+    main()

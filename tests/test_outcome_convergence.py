@@ -1,0 +1,130 @@
+"""benchmarks/outcome_convergence.py: its statistics against independent computations, its definition of converged,
+and a small study end to end, resumed from its kept pieces."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.stats import chi2_contingency
+
+from benchmarks import outcome_convergence as study
+
+
+def run_of(successes, endings=None, peaks=None, offsets=None):
+    n = len(successes)
+    rng = np.random.default_rng(n)
+    return {"successes": [bool(s) for s in successes],
+            "endings": endings or ["success" if s else "lost" for s in successes],
+            "peak_forces_N": list(rng.uniform(1.0, 3.0, n) if peaks is None else peaks),
+            "final_offsets_m": (rng.normal(0.0, 0.01, (n, 3)) if offsets is None else np.asarray(offsets)).tolist()}
+
+
+def test_wilson_interval_matches_the_closed_form_values():
+    assert study.wilson_interval(50, 100) == pytest.approx((0.4038, 0.5962), abs=1e-4)
+    low, high = study.wilson_interval(0, 10)
+    assert low == 0.0 and high == pytest.approx(0.2775, abs=1e-4)
+
+
+@pytest.mark.parametrize("a, b", [((40, 100), (55, 100)), ((380, 400), (350, 400)), ((7, 9), (7, 9))])
+def test_two_proportion_test_is_the_chi_square_test_of_the_two_by_two_table(a, b):
+    table = [[a[0], a[1] - a[0]], [b[0], b[1] - b[0]]]
+    expected = chi2_contingency(table, correction=False).pvalue if a != b else 1.0
+    assert study.two_proportion_p(a[0], a[1], b[0], b[1]) == pytest.approx(expected, rel=1e-9)
+
+
+def test_endings_test_tells_one_distribution_from_two():
+    same = ["success"] * 60 + ["lost"] * 30 + ["harmed"] * 10
+    assert study.endings_p(same, list(reversed(same))) == pytest.approx(1.0)
+    assert study.endings_p(same, ["success"] * 30 + ["lost"] * 30 + ["harmed"] * 40) < 1e-6
+    assert study.endings_p(["success"] * 5, ["success"] * 5) == 1.0
+
+
+def test_a_run_converges_to_itself_and_not_to_a_run_with_many_labels_flipped():
+    rng = np.random.default_rng(0)
+    labels = rng.random(400) < 0.8
+    reference = run_of(labels)
+    itself = study.converged(reference, reference, floor=1.0)
+    assert itself["passes"] and itself["label_agreement"] == 1.0 and itself["median_position_gap_m"] == 0.0
+    flipped = labels.copy()
+    flipped[:120] = ~flipped[:120]  # 30 % of labels: the success rate moves too
+    worse = study.converged(run_of(flipped, offsets=reference["final_offsets_m"],
+                                   peaks=reference["peak_forces_N"]), reference, floor=0.95)
+    assert not worse["passes"] and worse["label_agreement"] == pytest.approx(0.7)
+
+
+def test_label_agreement_below_the_floor_fails_even_where_the_statistics_agree():
+    labels = np.arange(400) % 5 != 0  # 0.8
+    swapped = np.roll(labels, 1)  # the same rate, each label moved to the next seed: 40 % of labels differ
+    reference = run_of(labels)
+    test = study.converged(run_of(swapped, endings=list(np.roll(reference["endings"], 1)),
+                                  peaks=reference["peak_forces_N"], offsets=reference["final_offsets_m"]),
+                           reference, floor=0.9)
+    assert test["success_p"] == 1.0 and test["endings_p"] == pytest.approx(1.0)
+    assert test["label_agreement"] == pytest.approx(0.6) and not test["passes"]
+    assert study.converged(run_of(swapped, endings=list(np.roll(reference["endings"], 1)),
+                                  peaks=reference["peak_forces_N"], offsets=reference["final_offsets_m"]),
+                           reference, floor=0.61)["passes"]
+
+
+def test_a_shifted_force_distribution_fails_the_ks_test():
+    reference = run_of(np.ones(400, dtype=bool))
+    pressed = run_of(np.ones(400, dtype=bool), peaks=np.asarray(reference["peak_forces_N"]) + 0.3,
+                     offsets=reference["final_offsets_m"])
+    test = study.converged(pressed, reference, floor=1.0)
+    assert test["peak_force_ks_p"] < 1e-3 and not test["passes"]
+
+
+def test_the_largest_converged_step_needs_every_finer_step_to_pass():
+    rows = {f"{dt:g}": {"against_reference": None if dt == 0.001 else {"passes": passes}}
+            for dt, passes in ((0.001, None), (0.002, True), (0.004, False), (0.008, True))}
+    assert study.largest_converged(rows, 0.001) == 0.002
+
+
+def test_the_dts_option_is_checked():
+    assert study.parse_dts("planar=0.01,0.005", ["3d", "planar"])["planar"] == (0.01, 0.005)
+    with pytest.raises(ValueError, match="--dts names model"):
+        study.parse_dts("2d=0.01,0.005", ["3d"])
+    with pytest.raises(ValueError, match="at least two steps"):
+        study.parse_dts("3d=0.05,0.01", ["3d"])
+
+
+def test_command_line_refusals_name_the_option(capsys):
+    for argv, name in ((["--models", "2d"], "--models"), (["--controllers", "random"], "--controllers"),
+                       (["--episodes", "1"], "--episodes"), (["--workers", "0"], "--workers"),
+                       (["--stop-after", "0"], "--stop-after")):
+        with pytest.raises(SystemExit):
+            study.main(argv)
+        assert name in capsys.readouterr().err
+
+
+def test_the_perturbed_run_moves_only_the_spheres_start():
+    from soft_gripper_env.grasp_task import GraspTask
+
+    base = study.task_settings(study.Piece("3d", "reactive", 0.0025, False, 0, 2))
+    perturbed = study.task_settings(study.Piece("3d", "reactive", 0.0025, True, 0, 2))
+    assert set(perturbed) - set(base) == {"start_point"}
+    moved = np.subtract(perturbed["start_point"], GraspTask.start_point)
+    assert moved[0] == pytest.approx(study.PERTURBATION_M, rel=1e-6) and not moved[1:].any()
+
+
+@pytest.mark.slow
+def test_a_small_study_runs_and_resumes_from_its_kept_pieces(tmp_path, capsys, monkeypatch):
+    argv = ["--models", "planar", "--controllers", "ramp", "--dts", "planar=0.01,0.005", "--episodes", "3",
+            "--workers", "1", "--runs", str(tmp_path / "runs"), "--json", str(tmp_path / "study.json"),
+            "--plot", str(tmp_path / "study.png")]
+    monkeypatch.setattr(study, "PIECE", 2)  # two pieces per condition: 2 seeds and 1
+    summary = study.main(argv)
+    assert "0 of 8 pieces kept" in capsys.readouterr().out
+    written = json.loads((tmp_path / "study.json").read_text())
+    assert written["complete"] and (tmp_path / "study.png").stat().st_size > 10_000
+    rows = written["models"]["planar"]["ramp"]["dts"]
+    assert set(rows) == {"0.01", "0.005"} and rows["0.005"]["against_reference"] is None
+    assert rows["0.01"]["episodes"] == 3 and 0.0 <= rows["0.01"]["chaos_floor"]["label_agreement"] <= 1.0
+    again = study.main(argv)
+    assert "8 of 8 pieces kept" in capsys.readouterr().out and again["models"] == summary["models"]
+    # a piece run by other code is not taken
+    kept = next((tmp_path / "runs").glob("*.json"))
+    record = json.loads(kept.read_text())
+    kept.write_text(json.dumps({**record, "code": "another"}))
+    piece = study.Piece(**record["piece"])
+    assert study.kept_piece(tmp_path / "runs", piece, study.code_fingerprint()) is None
