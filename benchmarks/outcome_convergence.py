@@ -34,7 +34,7 @@ import json
 import math
 import sys
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -54,6 +54,10 @@ held-out sets (1,000,000 and 2,000,000 onwards)."""
 PERTURBATION_M = 1e-9
 """How far the perturbed run moves the sphere's start [m], along x: far below any physical scale of the task (the
 fingers' radius is millimetres, Newton's tolerance moves nodes by more)."""
+VARIANTS = {"base": "the model's defaults but for Δt",
+            "perturbed": "the sphere's start moved by PERTURBATION_M along x",
+            "tolerance 1e-6": "Newton's relative tolerance 1e-6 instead of the task's 1e-4"}
+"""The runs a condition can have, by name: a chaos floor compares "base" with one of the others."""
 PIECE = 80
 """Seeds per piece: five batches of the evaluation's 16 envs, about a minute of one core in 3-D at 2.5 ms."""
 SIGNIFICANCE = 0.05
@@ -70,22 +74,25 @@ ROOT = Path(__file__).resolve().parent.parent
 
 @dataclass(frozen=True)
 class Piece:
-    """Episodes on seeds ``first_seed`` … ``first_seed + episodes − 1`` of one condition."""
+    """Episodes on seeds ``first_seed`` … ``first_seed + episodes − 1`` of one condition: a model, a controller, a
+    physics step [s], a variant of :data:`VARIANTS`, and the device the physics runs on ("cpu" or "cuda")."""
 
     model: str
     controller: str
     dt: float
-    perturbed: bool
+    variant: str
     first_seed: int
     episodes: int
+    device: str = "cpu"
 
     @property
-    def condition(self) -> tuple[str, str, float, bool]:
-        return self.model, self.controller, self.dt, self.perturbed
+    def condition(self) -> tuple[str, str, float, str, str]:
+        return self.model, self.controller, self.dt, self.variant, self.device
 
     def file_name(self) -> str:
-        variant = "perturbed" if self.perturbed else "base"
-        return f"{self.model}_{self.controller}_dt{self.dt:.7f}_{variant}_{self.first_seed}_{self.episodes}.json"
+        device = "" if self.device == "cpu" else f"_{self.device}"
+        return (f"{self.model}_{self.controller}_dt{self.dt:.7f}_{self.variant.replace(' ', '_')}_{self.first_seed}_"
+                f"{self.episodes}{device}.json")
 
 
 def code_fingerprint() -> str:
@@ -105,14 +112,21 @@ def code_fingerprint() -> str:
 
 def task_settings(piece: Piece) -> dict:
     """The :class:`~soft_gripper_env.grasp_task.GraspTask` fields a piece runs with: the model's defaults but for
-    Δt, the perturbed start, and a trained policy's own observation and closing reflexes (its config.json)."""
+    Δt and the piece's variant (:data:`VARIANTS`), and a trained policy's own observation and closing reflexes (its
+    config.json)."""
+    from dataclasses import replace
+
     from agents.evaluate import PRETRAINED, REFLEXES, trained_task
     from soft_gripper_env.grasp_task import GraspTask
 
+    if piece.variant not in VARIANTS:
+        raise ValueError(f"variant = {piece.variant!r} is not one of {', '.join(VARIANTS)}")
     settings = {"model": piece.model, "physics_dt": piece.dt}
-    if piece.perturbed:
+    if piece.variant == "perturbed":
         x, y, z = GraspTask.start_point
         settings["start_point"] = (x + PERTURBATION_M, y, z)
+    if piece.variant == "tolerance 1e-6":
+        settings["newton"] = replace(GraspTask(model=piece.model).newton, relative_tolerance=1e-6)
     if piece.controller == "pretrained":
         trained = trained_task(PRETRAINED)
         settings.update({name: trained.get(name) for name in REFLEXES}, observation=trained.get("observation", "full"))
@@ -121,14 +135,15 @@ def task_settings(piece: Piece) -> dict:
 
 def run_piece(piece: Piece) -> dict:
     """Runs one piece (in a worker process): per seed its success, ending, peak finger force [N] and the sphere's
-    final offset from the grasp point [m], with the task it ran."""
+    final offset from the grasp point [m], with the task it ran. On the GPU all its episodes run at once."""
     from agents.evaluate import evaluate, make_policy
     from soft_gripper_env.grasp_task import GraspTask
 
     settings = task_settings(piece)
     task = GraspTask(**settings)
     policy = make_policy(piece.controller, task, piece.first_seed)
-    result = evaluate(policy, piece.episodes, piece.first_seed, progress=False, **settings)
+    on_gpu = {"num_envs": piece.episodes, "device": piece.device} if piece.device != "cpu" else {}
+    result = evaluate(policy, piece.episodes, piece.first_seed, progress=False, **on_gpu, **settings)
     return {"piece": asdict(piece), "task": repr(task), "successes": result["successes"],
             "endings": result["episode_endings"], "peak_forces_N": result["peak_contact_forces_N"],
             "final_offsets_m": result["final_object_offsets"], "seconds": result["seconds"]}
@@ -138,9 +153,9 @@ def plan(models: list[str], controllers: list[str], dts: dict[str, tuple[float, 
          seed: int) -> list[Piece]:
     """Every piece of the study, in the order they run: by controller, model, Δt from coarse to fine (the cheap
     first), the unperturbed run before the perturbed one."""
-    return [Piece(model, controller, dt, perturbed, first, min(PIECE, seed + episodes - first))
+    return [Piece(model, controller, dt, variant, first, min(PIECE, seed + episodes - first))
             for controller in controllers for model in models for dt in sorted(dts[model], reverse=True)
-            for perturbed in (False, True) for first in range(seed, seed + episodes, PIECE)]
+            for variant in ("base", "perturbed") for first in range(seed, seed + episodes, PIECE)]
 
 
 def kept_piece(runs: Path, piece: Piece, fingerprint: str) -> dict | None:
@@ -155,19 +170,26 @@ def kept_piece(runs: Path, piece: Piece, fingerprint: str) -> dict | None:
     return kept if same else None
 
 
+def kept_results(pieces: list[Piece], runs: Path) -> dict[Piece, dict]:
+    """The pieces of ``pieces`` kept in ``runs`` that ran today's task with today's code (:func:`kept_piece`)."""
+    fingerprint = code_fingerprint()
+    return {piece: kept for piece in pieces if (kept := kept_piece(runs, piece, fingerprint)) is not None}
+
+
 def run_study(pieces: list[Piece], runs: Path, workers: int, stop_after_s: float = math.inf) -> dict[Piece, dict]:
-    """Every piece's result: kept ones from ``runs``, the others run ``workers`` at a time and kept there as each
-    finishes; no piece starts after ``stop_after_s`` seconds. Returns the pieces that are there."""
+    """Every piece's result: kept ones from ``runs``, the others run ``workers`` processes at a time (0: one at a
+    time in this process, as the GPU's pieces run) and kept there as each finishes; no piece starts after
+    ``stop_after_s`` seconds. Returns the pieces that are there."""
     runs.mkdir(parents=True, exist_ok=True)
     fingerprint = code_fingerprint()
-    results = {piece: kept for piece in pieces if (kept := kept_piece(runs, piece, fingerprint)) is not None}
+    results = kept_results(pieces, runs)
     missing = [piece for piece in pieces if piece not in results]
-    print(f"{len(results)} of {len(pieces)} pieces kept from earlier calls; {len(missing)} to run, {workers} at a "
-          f"time (code {fingerprint})", flush=True)
+    print(f"{len(results)} of {len(pieces)} pieces kept from earlier calls; {len(missing)} to run, "
+          f"{max(workers, 1)} at a time (code {fingerprint})", flush=True)
     if not missing:
         return results
     start = time.monotonic()
-    with ProcessPoolExecutor(workers) as pool, \
+    with (ProcessPoolExecutor(workers) if workers else ThreadPoolExecutor(1)) as pool, \
             tqdm(total=sum(p.episodes for p in missing), desc="episodes", unit="episode", file=sys.stdout) as bar:
         queue = iter(missing)
         running = {}
@@ -176,7 +198,7 @@ def run_study(pieces: list[Piece], runs: Path, workers: int, stop_after_s: float
             if time.monotonic() - start < stop_after_s and (piece := next(queue, None)) is not None:
                 running[pool.submit(run_piece, piece)] = piece
 
-        for _ in range(workers):
+        for _ in range(max(workers, 1)):
             submit()
         while running:
             done, _ = wait(running, return_when=FIRST_COMPLETED)
@@ -187,7 +209,9 @@ def run_study(pieces: list[Piece], runs: Path, workers: int, stop_after_s: float
                 results[piece] = result
                 bar.update(piece.episodes)
                 bar.write(f"  {piece.model} {piece.controller} Δt {1e3 * piece.dt:g} ms"
-                          f"{' perturbed' if piece.perturbed else ''}, seeds {piece.first_seed}+{piece.episodes}: "
+                          f"{'' if piece.variant == 'base' else ', ' + piece.variant}"
+                          f"{'' if piece.device == 'cpu' else ' on ' + piece.device}, "
+                          f"seeds {piece.first_seed}+{piece.episodes}: "
                           f"success {np.mean(result['successes']):.2f}, {result['seconds']:.0f} s")
                 submit()
     if len(results) < len(pieces):
@@ -305,17 +329,18 @@ def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[st
     for model in models:
         summary["models"][model] = {}
         for controller in controllers:
-            there = [dt for dt in sorted(dts[model]) if (model, controller, dt, False) in joined
-                     and (model, controller, dt, True) in joined]
+            there = [dt for dt in sorted(dts[model]) if (model, controller, dt, "base", "cpu") in joined
+                     and (model, controller, dt, "perturbed", "cpu") in joined]
             if not there:
                 continue
             reference_dt = there[0]
-            reference = joined[(model, controller, reference_dt, False)]
-            floor = agreement(reference, joined[(model, controller, reference_dt, True)])["label_agreement"]
+            reference = joined[(model, controller, reference_dt, "base", "cpu")]
+            floor = agreement(reference, joined[(model, controller, reference_dt, "perturbed", "cpu")])[
+                "label_agreement"]
             rows = {}
             for dt in there:
-                run = joined[(model, controller, dt, False)]
-                perturbed = agreement(run, joined[(model, controller, dt, True)])
+                run = joined[(model, controller, dt, "base", "cpu")]
+                perturbed = agreement(run, joined[(model, controller, dt, "perturbed", "cpu")])
                 row = {**describe(run), "chaos_floor": perturbed,
                        "against_reference": None if dt == reference_dt else converged(run, reference, floor)}
                 rows[f"{dt:g}"] = row

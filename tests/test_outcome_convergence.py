@@ -100,8 +100,8 @@ def test_command_line_refusals_name_the_option(capsys):
 def test_the_perturbed_run_moves_only_the_spheres_start():
     from soft_gripper_env.grasp_task import GraspTask
 
-    base = study.task_settings(study.Piece("3d", "reactive", 0.0025, False, 0, 2))
-    perturbed = study.task_settings(study.Piece("3d", "reactive", 0.0025, True, 0, 2))
+    base = study.task_settings(study.Piece("3d", "reactive", 0.0025, "base", 0, 2))
+    perturbed = study.task_settings(study.Piece("3d", "reactive", 0.0025, "perturbed", 0, 2))
     assert set(perturbed) - set(base) == {"start_point"}
     moved = np.subtract(perturbed["start_point"], GraspTask.start_point)
     assert moved[0] == pytest.approx(study.PERTURBATION_M, rel=1e-6) and not moved[1:].any()

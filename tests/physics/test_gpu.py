@@ -243,6 +243,33 @@ def test_gpu_speed_benchmark_runs_in_the_simulator(tmp_path):
     assert (tmp_path / "gpu_speed.png").stat().st_size > 0
 
 
+@pytest.mark.slow
+@needs_numba_cuda
+def test_gpu_outcome_study_runs_in_the_simulator(tmp_path):
+    """The outcome study a lent GPU runs, on three planar seeds: the CPU part's pieces (kept for the GPU machine),
+    then the GPU part in Numba's CUDA simulator, which runs the CPU's code, so the GPU's episodes end exactly as
+    the CPU's: every label agrees and the sphere ends in the same place. The GPU part refuses to start without the
+    CPU's pieces."""
+    options = ["--models", "planar", "--episodes", "3", "--runs", str(tmp_path / "runs"), "--json",
+               str(tmp_path / "gpu_outcomes.json"), "--plot", str(tmp_path / "gpu_outcomes.png")]
+    missing = _python(f"from benchmarks.gpu_outcomes import main\nmain({['--part', 'cuda'] + options!r})",
+                      simulator=True)
+    assert missing.returncode != 0 and "run --part cpu first" in missing.stderr
+    run = _python(f"""
+    from benchmarks.gpu_outcomes import main
+    main({['--part', 'cpu', '--workers', '1'] + options!r})
+    main({['--part', 'cuda'] + options!r})
+    print("RESULT {{}}")
+    """, simulator=True)
+    _result(run)
+    planar = json.loads((tmp_path / "gpu_outcomes.json").read_text())["models"]["planar"]
+    assert planar["gpu"]["episodes"] == planar["cpu"]["episodes"] == 3
+    against = planar["gpu_against_cpu"]
+    assert against["label_agreement"] == 1.0 and against["p90_position_gap_m"] == 0.0 and against["passes"]
+    assert 0.0 <= planar["floor"]["label_agreement"] <= 1.0
+    assert (tmp_path / "gpu_outcomes.png").stat().st_size > 10_000
+
+
 def test_device_is_checked():
     scene = fingers_alone("planar", 1)[0][0]
     with pytest.raises(ValueError, match="device = 'tpu'"):
