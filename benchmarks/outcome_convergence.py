@@ -54,10 +54,11 @@ held-out sets (1,000,000 and 2,000,000 onwards)."""
 PERTURBATION_M = 1e-9
 """How far the perturbed run moves the sphere's start [m], along x: far below any physical scale of the task (the
 fingers' radius is millimetres, Newton's tolerance moves nodes by more)."""
-VARIANTS = {"base": "the model's defaults but for Δt",
-            "perturbed": "the sphere's start moved by PERTURBATION_M along x",
-            "tolerance 1e-6": "Newton's relative tolerance 1e-6 instead of the task's 1e-4"}
-"""The runs a condition can have, by name: a chaos floor compares "base" with one of the others."""
+CHANGES = {"perturbed": "the sphere's start moved by PERTURBATION_M along x",
+           "tolerance 1e-6": "Newton's relative tolerance 1e-6 instead of the task's 1e-4",
+           "friction settled": "the corrector settles friction within its whole budget (friction_passes None)"}
+"""What a run can change from the model's defaults (other than Δt), by name. A run's variant is "base" (none of
+them) or the names of its changes joined by ", ": a chaos floor compares a variant with itself perturbed."""
 PIECE = 80
 """Seeds per piece: five batches of the evaluation's 16 envs, about a minute of one core in 3-D at 2.5 ms."""
 SIGNIFICANCE = 0.05
@@ -75,7 +76,7 @@ ROOT = Path(__file__).resolve().parent.parent
 @dataclass(frozen=True)
 class Piece:
     """Episodes on seeds ``first_seed`` … ``first_seed + episodes − 1`` of one condition: a model, a controller, a
-    physics step [s], a variant of :data:`VARIANTS`, and the device the physics runs on ("cpu" or "cuda")."""
+    physics step [s], a variant (:data:`CHANGES`), and the device the physics runs on ("cpu" or "cuda")."""
 
     model: str
     controller: str
@@ -91,8 +92,23 @@ class Piece:
 
     def file_name(self) -> str:
         device = "" if self.device == "cpu" else f"_{self.device}"
-        return (f"{self.model}_{self.controller}_dt{self.dt:.7f}_{self.variant.replace(' ', '_')}_{self.first_seed}_"
-                f"{self.episodes}{device}.json")
+        variant = self.variant.replace(", ", "+").replace(" ", "_")
+        seeds = f"{self.first_seed}_{self.episodes}"
+        return f"{self.model}_{self.controller}_dt{self.dt:.7f}_{variant}_{seeds}{device}.json"
+
+
+def changes_of(variant: str) -> list[str]:
+    """A variant's changes (:data:`CHANGES`), or a ValueError naming the one that is not a change."""
+    changes = [] if variant == "base" else [change.strip() for change in variant.split(",")]
+    for change in changes:
+        if change not in CHANGES:
+            raise ValueError(f"variant {variant!r}: {change!r} is not one of {', '.join(CHANGES)}")
+    return changes
+
+
+def with_change(variant: str, change: str) -> str:
+    """``variant`` with ``change`` added."""
+    return change if variant == "base" else f"{variant}, {change}"
 
 
 def code_fingerprint() -> str:
@@ -112,21 +128,22 @@ def code_fingerprint() -> str:
 
 def task_settings(piece: Piece) -> dict:
     """The :class:`~soft_gripper_env.grasp_task.GraspTask` fields a piece runs with: the model's defaults but for
-    Δt and the piece's variant (:data:`VARIANTS`), and a trained policy's own observation and closing reflexes (its
-    config.json)."""
+    Δt and the changes of the piece's variant (:data:`CHANGES`), and a trained policy's own observation and closing
+    reflexes (its config.json)."""
     from dataclasses import replace
 
     from agents.evaluate import PRETRAINED, REFLEXES, trained_task
     from soft_gripper_env.grasp_task import GraspTask
 
-    if piece.variant not in VARIANTS:
-        raise ValueError(f"variant = {piece.variant!r} is not one of {', '.join(VARIANTS)}")
+    changes = changes_of(piece.variant)
     settings = {"model": piece.model, "physics_dt": piece.dt}
-    if piece.variant == "perturbed":
+    if "perturbed" in changes:
         x, y, z = GraspTask.start_point
         settings["start_point"] = (x + PERTURBATION_M, y, z)
-    if piece.variant == "tolerance 1e-6":
+    if "tolerance 1e-6" in changes:
         settings["newton"] = replace(GraspTask(model=piece.model).newton, relative_tolerance=1e-6)
+    if "friction settled" in changes:
+        settings["friction_passes"] = None
     if piece.controller == "pretrained":
         trained = trained_task(PRETRAINED)
         settings.update({name: trained.get(name) for name in REFLEXES}, observation=trained.get("observation", "full"))
@@ -149,13 +166,14 @@ def run_piece(piece: Piece) -> dict:
             "final_offsets_m": result["final_object_offsets"], "seconds": result["seconds"]}
 
 
-def plan(models: list[str], controllers: list[str], dts: dict[str, tuple[float, ...]], episodes: int,
-         seed: int) -> list[Piece]:
-    """Every piece of the study, in the order they run: by controller, model, Δt from coarse to fine (the cheap
-    first), the unperturbed run before the perturbed one."""
-    return [Piece(model, controller, dt, variant, first, min(PIECE, seed + episodes - first))
+def plan(models: list[str], controllers: list[str], dts: dict[str, tuple[float, ...]], episodes: int, seed: int,
+         variant: str = "base", floor: bool = True) -> list[Piece]:
+    """Every piece of the study of ``variant``, in the order they run: by controller, model, Δt from coarse to fine
+    (the cheap first), the variant before its perturbed twin (without ``floor``, none)."""
+    variants = (variant, with_change(variant, "perturbed")) if floor else (variant,)
+    return [Piece(model, controller, dt, run, first, min(PIECE, seed + episodes - first))
             for controller in controllers for model in models for dt in sorted(dts[model], reverse=True)
-            for variant in ("base", "perturbed") for first in range(seed, seed + episodes, PIECE)]
+            for run in variants for first in range(seed, seed + episodes, PIECE)]
 
 
 def kept_piece(runs: Path, piece: Piece, fingerprint: str) -> dict | None:
@@ -294,7 +312,7 @@ def describe(run: dict) -> dict:
             "p90_final_distance_m": float(np.percentile(distance, 90))}
 
 
-def converged(run: dict, reference: dict, floor: float) -> dict:
+def converged(run: dict, reference: dict, floor: float | None) -> dict:
     """Whether ``run``'s outcomes are ``reference``'s (the finest Δt's) within sampling error, on the same seeds:
 
     - success rate: two-proportion z-test, p > :data:`SIGNIFICANCE`;
@@ -304,7 +322,7 @@ def converged(run: dict, reference: dict, floor: float) -> dict:
     - per-seed success labels: agreement with the reference at least the chaos ``floor`` (the reference's agreement
       with its own perturbed run) less :data:`FLOOR_MARGIN`.
 
-    Returns each test's value and ``passes``, all of them."""
+    Returns each test's value and ``passes``, all of them (None without a ``floor``: the study ran none)."""
     n, m = len(run["successes"]), len(reference["successes"])
     tests = {"success_p": two_proportion_p(int(np.sum(run["successes"])), n, int(np.sum(reference["successes"])), m),
              "endings_p": endings_p(run["endings"], reference["endings"]),
@@ -312,16 +330,19 @@ def converged(run: dict, reference: dict, floor: float) -> dict:
              "final_distance_ks_p": ks_p(np.linalg.norm(run["final_offsets_m"], axis=1),
                                          np.linalg.norm(reference["final_offsets_m"], axis=1)),
              **agreement(run, reference), "floor": floor}
-    tests["passes"] = bool(all(tests[key] > SIGNIFICANCE for key in ("success_p", "endings_p", "peak_force_ks_p",
-                                                                      "final_distance_ks_p"))
-                           and tests["label_agreement"] >= floor - FLOOR_MARGIN)
+    tests["passes"] = None if floor is None else bool(
+        all(tests[key] > SIGNIFICANCE for key in ("success_p", "endings_p", "peak_force_ks_p", "final_distance_ks_p"))
+        and tests["label_agreement"] >= floor - FLOOR_MARGIN)
     return tests
 
 
 def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[str],
-              dts: dict[str, tuple[float, ...]], episodes: int, seed: int) -> dict:
-    """The study's summary from the complete conditions ``joined`` (:func:`conditions`); prints its table."""
-    summary = {"episodes": episodes, "first_seed": seed, "perturbation_m": PERTURBATION_M,
+              dts: dict[str, tuple[float, ...]], episodes: int, seed: int, variant: str = "base",
+              floor: bool = True) -> dict:
+    """The study's summary of ``variant`` (and its perturbed twin, with ``floor``) from the complete conditions
+    ``joined`` (:func:`conditions`); prints its table."""
+    perturbed = with_change(variant, "perturbed")
+    summary = {"episodes": episodes, "first_seed": seed, "variant": variant, "perturbation_m": PERTURBATION_M,
                "significance": SIGNIFICANCE, "floor_margin": FLOOR_MARGIN, "code": code_fingerprint(), "models": {}}
     print("\n| model | controller | Δt [ms] | success (95 % interval) | labels agree with the finest | floor at this "
           "Δt | median gap [mm] | success p | endings p | peak-force KS p | final-distance KS p | converged |\n"
@@ -329,40 +350,55 @@ def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[st
     for model in models:
         summary["models"][model] = {}
         for controller in controllers:
-            there = [dt for dt in sorted(dts[model]) if (model, controller, dt, "base", "cpu") in joined
-                     and (model, controller, dt, "perturbed", "cpu") in joined]
+            there = [dt for dt in sorted(dts[model]) if (model, controller, dt, variant, "cpu") in joined
+                     and (not floor or (model, controller, dt, perturbed, "cpu") in joined)]
             if not there:
                 continue
             reference_dt = there[0]
-            reference = joined[(model, controller, reference_dt, "base", "cpu")]
-            floor = agreement(reference, joined[(model, controller, reference_dt, "perturbed", "cpu")])[
-                "label_agreement"]
+            reference = joined[(model, controller, reference_dt, variant, "cpu")]
+            chaos = agreement(reference, joined[(model, controller, reference_dt, perturbed, "cpu")])[
+                "label_agreement"] if floor else None
             rows = {}
             for dt in there:
-                run = joined[(model, controller, dt, "base", "cpu")]
-                perturbed = agreement(run, joined[(model, controller, dt, "perturbed", "cpu")])
-                row = {**describe(run), "chaos_floor": perturbed,
-                       "against_reference": None if dt == reference_dt else converged(run, reference, floor)}
+                run = joined[(model, controller, dt, variant, "cpu")]
+                twin = agreement(run, joined[(model, controller, dt, perturbed, "cpu")]) if floor else None
+                row = {**describe(run), "chaos_floor": twin,
+                       "against_reference": None if dt == reference_dt else converged(run, reference, chaos)}
                 rows[f"{dt:g}"] = row
                 test = row["against_reference"]
                 low, high = row["success_interval_95"]
                 print(f"| {model} | {controller} | {1e3 * dt:g} | {row['success_rate']:.3f} ({low:.3f}–{high:.3f}) | "
                       + ("reference |" if test is None else f"{test['label_agreement']:.3f} |")
-                      + f" {perturbed['label_agreement']:.3f} | "
+                      + (f" {twin['label_agreement']:.3f} | " if floor else " — | ")
                       + ("— | — | — | — | — | — |" if test is None else
                          f"{1e3 * test['median_position_gap_m']:.2f} | {test['success_p']:.2f} | "
                          f"{test['endings_p']:.2f} | {test['peak_force_ks_p']:.2f} | "
-                         f"{test['final_distance_ks_p']:.2f} | {'yes' if test['passes'] else 'no'} |"))
+                         f"{test['final_distance_ks_p']:.2f} | "
+                         f"{ {True: 'yes', False: 'no', None: '— (no floor)'}[test['passes']]} |"))
             finest = min(dts[model])
             if reference_dt != finest:
                 print(f"  ({model}, {controller}: Δt = {1e3 * finest:g} ms is not there yet; "
                       f"{1e3 * reference_dt:g} ms stands in as the reference)")
             passing = [float(dt) for dt in rows if rows[dt]["against_reference"] is not None
                        and rows[dt]["against_reference"]["passes"]]
+            order = gap_order(rows)
+            if order is not None:
+                print(f"  ({model}, {controller}: the median gap to the finest Δt falls as Δt^{order:.2f})")
             summary["models"][model][controller] = {
-                "reference_dt_s": reference_dt, "finest_dt_s": finest, "dts": rows,
+                "reference_dt_s": reference_dt, "finest_dt_s": finest, "dts": rows, "median_gap_order": order,
                 "largest_converged_dt_s": largest_converged(rows, reference_dt) if passing else None}
     return summary
+
+
+def gap_order(rows: dict) -> float | None:
+    """The order p of the median gap to the finest Δt, gap ∝ Δt^p, fitted on a log–log scale over the Δt compared
+    with the finest (None with fewer than two, or a gap of zero)."""
+    tested = [(float(k), row["against_reference"]["median_position_gap_m"]) for k, row in rows.items()
+              if row["against_reference"] is not None]
+    if len(tested) < 2 or min(gap for _, gap in tested) <= 0.0:
+        return None
+    dt, gap = np.log(np.array(tested)).T
+    return float(np.polyfit(dt, gap, 1)[0])
 
 
 def largest_converged(rows: dict, reference_dt: float) -> float:
@@ -426,15 +462,16 @@ def plot(summary: dict, path: Path) -> None:
                              marker="o", capsize=3, label=controller)
             tested = [k for k in rows if rows[k]["against_reference"] is not None]
             t = np.array([float(k) for k in tested]) * 1e3
-            passes = np.array([rows[k]["against_reference"]["passes"] for k in tested], dtype=bool)
+            passes = np.array([bool(rows[k]["against_reference"]["passes"]) for k in tested], dtype=bool)
             for axis, key, floor_key, scale in ((agree, "label_agreement", "label_agreement", 1.0),
                                                 (gap, "median_position_gap_m", "median_position_gap_m", 1e3)):
                 values = np.array([rows[k]["against_reference"][key] for k in tested]) * scale
                 axis.plot(t, values, color=colour, label=f"{controller}: against {1e3 * study['reference_dt_s']:g} ms")
-                axis.scatter(t[passes], values[passes], color=colour, zorder=3)
+                axis.scatter(t[passes], values[passes], color=colour, zorder=3)  # None (no floor) draws open
                 axis.scatter(t[~passes], values[~passes], facecolors="white", edgecolors=colour, zorder=3)
-                axis.plot(dt, [rows[k]["chaos_floor"][floor_key] * scale for k in rows], color=colour,
-                          linestyle="--", marker="x", label=f"{controller}: chaos floor (start moved 1 nm)")
+                if all(rows[k]["chaos_floor"] is not None for k in rows):
+                    axis.plot(dt, [rows[k]["chaos_floor"][floor_key] * scale for k in rows], color=colour,
+                              linestyle="--", marker="x", label=f"{controller}: chaos floor (start moved 1 nm)")
         success.set(ylabel="success rate (95 % interval)", title=f"{model}: success against Δt")
         agree.set(ylabel="share of seeds with the same label", title=f"{model}: labels against the finest Δt")
         gap.set(ylabel="median gap of the sphere's final place [mm]", yscale="log",
@@ -447,7 +484,8 @@ def plot(summary: dict, path: Path) -> None:
             axis.grid(True, alpha=0.3)
         success.legend(fontsize=8)
         agree.legend(fontsize=7)
-    fig.suptitle(f"Grasp outcomes against Δt, {summary['episodes']} seeds from {summary['first_seed']} "
+    variant = "" if summary["variant"] == "base" else f" ({summary['variant']})"
+    fig.suptitle(f"Grasp outcomes against Δt{variant}, {summary['episodes']} seeds from {summary['first_seed']} "
                  "(filled: converged by every test; open: not)")
     save_plot(fig, path)
     plt.close(fig)
@@ -484,6 +522,11 @@ def main(argv: list[str] | None = None) -> dict:
                         help="where each finished piece is kept (default out/outcome_convergence_runs)")
     parser.add_argument("--json", type=Path, default=Path("out") / "outcome_convergence.json")
     parser.add_argument("--plot", type=Path, default=Path("out") / "outcome_convergence.png")
+    parser.add_argument("--change", action="append", default=[], choices=[c for c in CHANGES if c != "perturbed"],
+                        help="run every condition with this change from the defaults (repeatable), to see what it "
+                             "does to convergence; the runs are kept apart from the defaults' own")
+    parser.add_argument("--no-floor", action="store_true",
+                        help="run no perturbed twins (half the cost; no chaos floor, so no verdict)")
     parser.add_argument("--time", action="store_true", help="also time each model and Δt against Ant-v5")
     args = parser.parse_args(argv)
     models = [m.strip() for m in args.models.split(",") if m.strip()]
@@ -502,9 +545,11 @@ def main(argv: list[str] | None = None) -> dict:
         dts = parse_dts(args.dts, models)
     except ValueError as error:
         parser.error(str(error))
-    pieces = plan(models, controllers, dts, args.episodes, args.seed)
+    variant = ", ".join(args.change) or "base"
+    pieces = plan(models, controllers, dts, args.episodes, args.seed, variant, not args.no_floor)
     results = run_study(pieces, args.runs, args.workers, 60 * args.stop_after)
-    summary = summarize(conditions(results, pieces), models, controllers, dts, args.episodes, args.seed)
+    summary = summarize(conditions(results, pieces), models, controllers, dts, args.episodes, args.seed, variant,
+                        not args.no_floor)
     summary["complete"] = len(results) == len(pieces)
     if args.time:
         summary["timing"] = time_dts(models, dts, args.seed)

@@ -128,3 +128,43 @@ def test_a_small_study_runs_and_resumes_from_its_kept_pieces(tmp_path, capsys, m
     kept.write_text(json.dumps({**record, "code": "another"}))
     piece = study.Piece(**record["piece"])
     assert study.kept_piece(tmp_path / "runs", piece, study.code_fingerprint()) is None
+
+
+def test_a_variants_changes_reach_the_task_and_compose():
+    piece = study.Piece("3d", "reactive", 0.00125, "friction settled, tolerance 1e-6, perturbed", 0, 2)
+    settings = study.task_settings(piece)
+    assert settings["friction_passes"] is None and settings["newton"].relative_tolerance == 1e-6
+    assert settings["physics_dt"] == 0.00125 and settings["start_point"][0] == pytest.approx(study.PERTURBATION_M)
+    assert study.with_change("base", "perturbed") == "perturbed"
+    assert study.with_change("friction settled", "perturbed") == "friction settled, perturbed"
+    with pytest.raises(ValueError, match="'stiffer' is not one of"):
+        study.task_settings(study.Piece("3d", "reactive", 0.0025, "perturbed, stiffer", 0, 2))
+    names = {study.Piece("3d", "reactive", 0.0025, v, 0, 2).file_name()
+             for v in ("base", "perturbed", "friction settled", "friction settled, perturbed")}
+    assert len(names) == 4  # the variants' pieces are kept apart
+
+
+def test_the_gaps_order_is_the_slope_on_a_log_log_scale():
+    rows = {f"{dt:g}": {"against_reference": None if dt == 0.001 else {"median_position_gap_m": 3.0 * dt ** 1.5}}
+            for dt in (0.001, 0.002, 0.004, 0.008)}
+    assert study.gap_order(rows) == pytest.approx(1.5)
+    assert study.gap_order({k: v for k, v in rows.items() if k in ("0.001", "0.002")}) is None
+
+
+def test_without_a_floor_no_verdict_is_given():
+    reference = run_of(np.ones(50, dtype=bool))
+    assert study.converged(reference, reference, floor=None)["passes"] is None
+
+
+@pytest.mark.slow
+def test_a_study_of_a_change_without_a_floor_runs_apart_from_the_defaults(tmp_path, capsys, monkeypatch):
+    argv = ["--models", "planar", "--controllers", "ramp", "--dts", "planar=0.01,0.005", "--episodes", "2",
+            "--workers", "1", "--runs", str(tmp_path / "runs"), "--json", str(tmp_path / "study.json"),
+            "--plot", str(tmp_path / "study.png")]
+    study.main(argv)
+    summary = study.main(argv + ["--change", "friction settled", "--no-floor"])
+    assert "0 of 2 pieces kept" in capsys.readouterr().out  # none of the defaults' pieces is taken for it
+    assert summary["variant"] == "friction settled"
+    rows = summary["models"]["planar"]["ramp"]["dts"]
+    assert rows["0.01"]["chaos_floor"] is None and rows["0.01"]["against_reference"]["passes"] is None
+    assert len(list((tmp_path / "runs").glob("*friction_settled*"))) == 2
