@@ -2,7 +2,7 @@
 the CPU does.
 
     python -m benchmarks.gpu_outcomes --part cpu [--models 3d,planar] [--episodes 1000] [--seed 4000000]
-        [--workers 2] [--stop-after MINUTES] [--runs out/gpu_outcome_runs]
+        [--workers 2] [--stop-after MINUTES] [--runs out/gpu_outcomes_runs]
     python -m benchmarks.gpu_outcomes --part cuda [the same options] [--json out/gpu_outcomes.json]
         [--plot out/gpu_outcomes.png]
 
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -33,15 +32,16 @@ from ._timing import save_plot
 from .outcome_convergence import (
     FLOOR_MARGIN,
     Piece,
+    add_study_options,
     agreement,
     conditions,
     converged,
     describe,
     kept_results,
     run_study,
+    study_models,
 )
 
-MODELS = ("3d", "planar")
 CONTROLLER = "reactive"
 FIRST_SEED = 4_000_000
 """The first seed: apart from the seeds that tuned a controller, the evaluation's held-out sets (1,000,000 and
@@ -137,26 +137,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--part", choices=("cpu", "cuda"), required=True,
                         help="cpu: the CPU's runs and the floor, in pieces; cuda: the GPU's runs and the summary")
-    parser.add_argument("--models", default=",".join(MODELS), help="comma-separated, of 3d, planar (default both)")
-    parser.add_argument("--episodes", type=int, default=1000, help="seeds per model (default 1000)")
-    parser.add_argument("--seed", type=int, default=FIRST_SEED, help=f"the first seed (default {FIRST_SEED})")
-    parser.add_argument("--workers", type=int, default=2, help="processes running CPU pieces (default 2)")
-    parser.add_argument("--stop-after", type=float, default=math.inf, metavar="MINUTES",
-                        help="start no CPU piece after this many minutes (default: run them all)")
-    parser.add_argument("--runs", type=Path, default=Path("out") / "gpu_outcome_runs",
-                        help="where each finished piece is kept (default out/gpu_outcome_runs)")
-    parser.add_argument("--json", type=Path, default=Path("out") / "gpu_outcomes.json")
-    parser.add_argument("--plot", type=Path, default=Path("out") / "gpu_outcomes.png")
+    add_study_options(parser, "gpu_outcomes", 1000, FIRST_SEED)
     args = parser.parse_args(argv)
-    models = [m.strip() for m in args.models.split(",") if m.strip()]
-    if not models or any(m not in MODELS for m in models):
-        parser.error(f"--models = {args.models!r}: each must be one of {', '.join(MODELS)}")
-    if args.episodes < 2:
-        parser.error(f"--episodes = {args.episodes} must be at least 2")
-    if args.workers < 1:
-        parser.error(f"--workers = {args.workers} must be at least 1")
-    if not args.stop_after > 0:
-        parser.error(f"--stop-after = {args.stop_after} must be a positive number of minutes")
+    models = study_models(parser, args)
     cpu_pieces = plan(models, args.episodes, args.seed, "cpu")
     if args.part == "cpu":
         results = run_study(cpu_pieces, args.runs, args.workers, 60 * args.stop_after)

@@ -506,22 +506,43 @@ def parse_dts(text: str | None, models: list[str]) -> dict[str, tuple[float, ...
     return dts
 
 
+def add_study_options(parser: argparse.ArgumentParser, name: str, episodes: int, seed: int) -> None:
+    """The options of an outcome study run in pieces (this one and :mod:`benchmarks.gpu_outcomes`): --models,
+    --episodes, --seed, --workers, --stop-after, --runs out/NAME_runs, --json out/NAME.json, --plot out/NAME.png."""
+    parser.add_argument("--models", default=",".join(MODELS), help="comma-separated, of 3d, planar (default both)")
+    parser.add_argument("--episodes", type=int, default=episodes, help=f"seeds per condition (default {episodes})")
+    parser.add_argument("--seed", type=int, default=seed, help=f"the first seed (default {seed})")
+    parser.add_argument("--workers", type=int, default=2, help="processes running CPU pieces (default 2)")
+    parser.add_argument("--stop-after", type=float, default=math.inf, metavar="MINUTES",
+                        help="start no CPU piece after this many minutes (default: run them all)")
+    parser.add_argument("--runs", type=Path, default=Path("out") / f"{name}_runs",
+                        help=f"where each finished piece is kept (default out/{name}_runs)")
+    parser.add_argument("--json", type=Path, default=Path("out") / f"{name}.json")
+    parser.add_argument("--plot", type=Path, default=Path("out") / f"{name}.png")
+
+
+def study_models(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
+    """The models of :func:`add_study_options`' parsed options, each option checked (the parser's error names the
+    option that is out of range)."""
+    models = [m.strip() for m in args.models.split(",") if m.strip()]
+    if not models or any(m not in MODELS for m in models):
+        parser.error(f"--models = {args.models!r}: each must be one of {', '.join(MODELS)}")
+    if args.episodes < 2:
+        parser.error(f"--episodes = {args.episodes} must be at least 2")
+    if args.workers < 1:
+        parser.error(f"--workers = {args.workers} must be at least 1")
+    if not args.stop_after > 0:
+        parser.error(f"--stop-after = {args.stop_after} must be a positive number of minutes")
+    return models
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--models", default=",".join(MODELS), help="comma-separated, of 3d, planar (default both)")
+    add_study_options(parser, "outcome_convergence", 400, FIRST_SEED)
     parser.add_argument("--controllers", default=",".join(CONTROLLERS),
                         help="comma-separated, of reactive, ramp, pretrained (default all three)")
     parser.add_argument("--dts", help="steps [s] per model, e.g. '3d=0.01,0.005;planar=0.01,0.005' "
                                       "(default: halved from 0.01 to 0.0003125 s in 3-D, to 0.000625 s planar)")
-    parser.add_argument("--episodes", type=int, default=400, help="seeds per condition (default 400)")
-    parser.add_argument("--seed", type=int, default=FIRST_SEED, help=f"the first seed (default {FIRST_SEED})")
-    parser.add_argument("--workers", type=int, default=2, help="processes running pieces (default 2)")
-    parser.add_argument("--stop-after", type=float, default=math.inf, metavar="MINUTES",
-                        help="start no piece after this many minutes (default: run them all)")
-    parser.add_argument("--runs", type=Path, default=Path("out") / "outcome_convergence_runs",
-                        help="where each finished piece is kept (default out/outcome_convergence_runs)")
-    parser.add_argument("--json", type=Path, default=Path("out") / "outcome_convergence.json")
-    parser.add_argument("--plot", type=Path, default=Path("out") / "outcome_convergence.png")
     parser.add_argument("--change", action="append", default=[], choices=[c for c in CHANGES if c != "perturbed"],
                         help="run every condition with this change from the defaults (repeatable), to see what it "
                              "does to convergence; the runs are kept apart from the defaults' own")
@@ -529,18 +550,10 @@ def main(argv: list[str] | None = None) -> dict:
                         help="run no perturbed twins (half the cost; no chaos floor, so no verdict)")
     parser.add_argument("--time", action="store_true", help="also time each model and Δt against Ant-v5")
     args = parser.parse_args(argv)
-    models = [m.strip() for m in args.models.split(",") if m.strip()]
+    models = study_models(parser, args)
     controllers = [c.strip() for c in args.controllers.split(",") if c.strip()]
-    if not models or any(m not in MODELS for m in models):
-        parser.error(f"--models = {args.models!r}: each must be one of {', '.join(MODELS)}")
     if not controllers or any(c not in CONTROLLERS for c in controllers):
         parser.error(f"--controllers = {args.controllers!r}: each must be one of {', '.join(CONTROLLERS)}")
-    if args.episodes < 2:
-        parser.error(f"--episodes = {args.episodes} must be at least 2")
-    if args.workers < 1:
-        parser.error(f"--workers = {args.workers} must be at least 1")
-    if not args.stop_after > 0:
-        parser.error(f"--stop-after = {args.stop_after} must be a positive number of minutes")
     try:
         dts = parse_dts(args.dts, models)
     except ValueError as error:
