@@ -168,3 +168,29 @@ def test_a_study_of_a_change_without_a_floor_runs_apart_from_the_defaults(tmp_pa
     rows = summary["models"]["planar"]["ramp"]["dts"]
     assert rows["0.01"]["chaos_floor"] is None and rows["0.01"]["against_reference"]["passes"] is None
     assert len(list((tmp_path / "runs").glob("*friction_settled*"))) == 2
+
+
+@pytest.mark.slow
+def test_the_physics_probe_runs_and_compares_each_step_with_the_finest(tmp_path):
+    from benchmarks import physics_convergence as probe
+
+    summary = probe.main(["--model", "planar", "--seeds", "2", "--dts", "0.01,0.005,0.0025", "--workers", "1",
+                          "--json", str(tmp_path / "p.json"), "--plot", str(tmp_path / "p.png")])
+    rows = summary["dts"]
+    assert list(rows) == ["0.01", "0.005", "0.0025"] and rows["0.0025"]["against_reference"] is None
+    gaps = [rows[k]["against_reference"]["median_position_gap_m"] for k in ("0.01", "0.005")]
+    assert all(0.0 <= gap < 0.05 for gap in gaps)  # the sphere stays in the grasp, within centimetres
+    assert all(row["median_holds_made_per_s"] >= 0 and row["failed"] == 0 for row in rows.values())
+    run = summary["runs"]["0/0.01"]
+    assert len(run["final_position_m"]) == 3 and run["holds_made"] >= 0
+    assert (tmp_path / "p.png").stat().st_size > 10_000
+
+
+def test_the_physics_probe_refuses_steps_it_cannot_compare(capsys):
+    from benchmarks import physics_convergence as probe
+
+    for dts, message in (("0.01,0.005", "at least three steps"), ("0.01,0.005,0.003", "divide the control"),
+                         ("0.01,x,0.005", "comma-separated")):
+        with pytest.raises(SystemExit):
+            probe.main(["--dts", dts])
+        assert message in capsys.readouterr().err
