@@ -105,10 +105,14 @@ def plot(summary: dict, path: Path) -> None:
     every = np.array([float(k) for k in rows]) * 1e3
     holds.plot(every, [rows[k]["median_holds_made_per_s"] for k in rows], "o-", label="median over the seeds")
     holds.plot(every, [rows[k]["most_holds_made_per_s"] for k in rows], "s--", label="the most")
-    holds.set(xscale="log", yscale="log", xlabel="physics step Δt [ms]", ylabel="holds made per second",
+    holds.set(xscale="log", xlabel="physics step Δt [ms]", ylabel="holds made per second",
               title=f"contacts caught, {COUNT_FROM_S:g}–{DURATION_S:g} s (κ̄ held)")
+    holds.set_yscale("symlog", linthresh=1.0)  # none made is a point too
+    holds.set_ylim(bottom=0.0)
     for axis in (gap, holds):
-        axis.grid(True, which="both", alpha=0.3)
+        axis.set_xticks(every, [f"{x:g}" for x in every])
+        axis.minorticks_off()
+        axis.grid(True, alpha=0.3)
         axis.legend(fontsize=8)
     fig.suptitle(f"scripted grasp, {summary['model']}, {len(summary['seeds'])} seeds"
                  f"{', still water' if summary['still'] else ''}")
