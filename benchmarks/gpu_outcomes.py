@@ -34,12 +34,15 @@ from .outcome_convergence import (
     Piece,
     add_study_options,
     agreement,
+    code_fingerprint,
     conditions,
     converged,
     describe,
     kept_results,
     run_study,
+    seed_ranges,
     study_models,
+    success_text,
 )
 
 CONTROLLER = "reactive"
@@ -59,11 +62,9 @@ def plan(models: list[str], episodes: int, seed: int, part: str) -> list[Piece]:
     """The pieces of one part: on the CPU, each model's run and its tolerance-1e-6 twin in pieces; on the GPU, each
     model's run as one piece."""
     if part == "cpu":
-        from .outcome_convergence import PIECE
-
-        return [Piece(model, CONTROLLER, default_dt(model), variant, first, min(PIECE, seed + episodes - first))
+        return [Piece(model, CONTROLLER, default_dt(model), variant, first, count)
                 for model in models for variant in ("base", "tolerance 1e-6")
-                for first in range(seed, seed + episodes, PIECE)]
+                for first, count in seed_ranges(seed, episodes)]
     return [Piece(model, CONTROLLER, default_dt(model), "base", seed, episodes, "cuda") for model in models]
 
 
@@ -87,13 +88,8 @@ def summarize(joined: dict, models: list[str], episodes: int, seed: int) -> dict
         row = {"physics_dt_s": dt, "cpu": describe(cpu), "cpu_tolerance_1e-6": describe(twin), "gpu": describe(gpu),
                "floor": floor, "gpu_against_cpu": test}
         summary["models"][model] = row
-
-        def rate(run: dict) -> str:
-            low, high = run["success_interval_95"]
-            return f"{run['success_rate']:.3f} ({low:.3f}–{high:.3f})"
-
-        print(f"| {model} | {1e3 * dt:g} | {rate(row['cpu'])} | {rate(row['cpu_tolerance_1e-6'])} | "
-              f"{rate(row['gpu'])} | {test['label_agreement']:.3f} | {floor['label_agreement']:.3f} | "
+        print(f"| {model} | {1e3 * dt:g} | {success_text(row['cpu'])} | {success_text(row['cpu_tolerance_1e-6'])} | "
+              f"{success_text(row['gpu'])} | {test['label_agreement']:.3f} | {floor['label_agreement']:.3f} | "
               f"{1e3 * test['median_position_gap_m']:.2f} | {test['success_p']:.2f} | {test['endings_p']:.2f} | "
               f"{test['peak_force_ks_p']:.2f} | {'yes' if test['passes'] else 'no'} |")
     return summary
@@ -145,7 +141,7 @@ def main(argv: list[str] | None = None) -> dict:
         results = run_study(cpu_pieces, args.runs, args.workers, 60 * args.stop_after)
         print(f"{len(results)} of {len(cpu_pieces)} CPU pieces are there; then: --part cuda on a GPU")
         return {"complete": len(results) == len(cpu_pieces)}
-    kept = kept_results(cpu_pieces, args.runs)
+    kept = kept_results(cpu_pieces, args.runs, code_fingerprint())
     if len(kept) < len(cpu_pieces):
         parser.error(f"{len(cpu_pieces) - len(kept)} of the CPU's {len(cpu_pieces)} pieces are not in {args.runs} "
                      "(or ran other code): run --part cpu first, with the same options, and bring its --runs folder")

@@ -166,14 +166,19 @@ def run_piece(piece: Piece) -> dict:
             "final_offsets_m": result["final_object_offsets"], "seconds": result["seconds"]}
 
 
+def seed_ranges(seed: int, episodes: int) -> list[tuple[int, int]]:
+    """The pieces' seeds, ``episodes`` from ``seed`` in pieces of :data:`PIECE`: (first seed, how many) each."""
+    return [(first, min(PIECE, seed + episodes - first)) for first in range(seed, seed + episodes, PIECE)]
+
+
 def plan(models: list[str], controllers: list[str], dts: dict[str, tuple[float, ...]], episodes: int, seed: int,
          variant: str = "base", floor: bool = True) -> list[Piece]:
     """Every piece of the study of ``variant``, in the order they run: by controller, model, Δt from coarse to fine
     (the cheap first), the variant before its perturbed twin (without ``floor``, none)."""
     variants = (variant, with_change(variant, "perturbed")) if floor else (variant,)
-    return [Piece(model, controller, dt, run, first, min(PIECE, seed + episodes - first))
+    return [Piece(model, controller, dt, run, first, count)
             for controller in controllers for model in models for dt in sorted(dts[model], reverse=True)
-            for run in variants for first in range(seed, seed + episodes, PIECE)]
+            for run in variants for first, count in seed_ranges(seed, episodes)]
 
 
 def kept_piece(runs: Path, piece: Piece, fingerprint: str) -> dict | None:
@@ -188,9 +193,9 @@ def kept_piece(runs: Path, piece: Piece, fingerprint: str) -> dict | None:
     return kept if same else None
 
 
-def kept_results(pieces: list[Piece], runs: Path) -> dict[Piece, dict]:
-    """The pieces of ``pieces`` kept in ``runs`` that ran today's task with today's code (:func:`kept_piece`)."""
-    fingerprint = code_fingerprint()
+def kept_results(pieces: list[Piece], runs: Path, fingerprint: str) -> dict[Piece, dict]:
+    """The pieces of ``pieces`` kept in ``runs`` that ran today's task with the code of ``fingerprint``
+    (:func:`code_fingerprint`, :func:`kept_piece`)."""
     return {piece: kept for piece in pieces if (kept := kept_piece(runs, piece, fingerprint)) is not None}
 
 
@@ -200,7 +205,7 @@ def run_study(pieces: list[Piece], runs: Path, workers: int, stop_after_s: float
     ``stop_after_s`` seconds. Returns the pieces that are there."""
     runs.mkdir(parents=True, exist_ok=True)
     fingerprint = code_fingerprint()
-    results = kept_results(pieces, runs)
+    results = kept_results(pieces, runs, fingerprint)
     missing = [piece for piece in pieces if piece not in results]
     print(f"{len(results)} of {len(pieces)} pieces kept from earlier calls; {len(missing)} to run, "
           f"{max(workers, 1)} at a time (code {fingerprint})", flush=True)
@@ -298,6 +303,12 @@ def agreement(a: dict, b: dict) -> dict:
             "median_position_gap_m": float(np.median(gap)), "p90_position_gap_m": float(np.percentile(gap, 90))}
 
 
+def success_text(described: dict) -> str:
+    """A run's success rate with its 95 % interval (:func:`describe`), as the tables print it."""
+    low, high = described["success_interval_95"]
+    return f"{described['success_rate']:.3f} ({low:.3f}–{high:.3f})"
+
+
 def describe(run: dict) -> dict:
     """One run's outcome statistics: success rate and interval, endings, peak force and final distance from the
     grasp point."""
@@ -366,8 +377,7 @@ def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[st
                        "against_reference": None if dt == reference_dt else converged(run, reference, chaos)}
                 rows[f"{dt:g}"] = row
                 test = row["against_reference"]
-                low, high = row["success_interval_95"]
-                print(f"| {model} | {controller} | {1e3 * dt:g} | {row['success_rate']:.3f} ({low:.3f}–{high:.3f}) | "
+                print(f"| {model} | {controller} | {1e3 * dt:g} | {success_text(row)} | "
                       + ("reference |" if test is None else f"{test['label_agreement']:.3f} |")
                       + (f" {twin['label_agreement']:.3f} | " if floor else " — | ")
                       + ("— | — | — | — | — | — |" if test is None else
@@ -463,14 +473,13 @@ def plot(summary: dict, path: Path) -> None:
             tested = [k for k in rows if rows[k]["against_reference"] is not None]
             t = np.array([float(k) for k in tested]) * 1e3
             passes = np.array([bool(rows[k]["against_reference"]["passes"]) for k in tested], dtype=bool)
-            for axis, key, floor_key, scale in ((agree, "label_agreement", "label_agreement", 1.0),
-                                                (gap, "median_position_gap_m", "median_position_gap_m", 1e3)):
+            for axis, key, scale in ((agree, "label_agreement", 1.0), (gap, "median_position_gap_m", 1e3)):
                 values = np.array([rows[k]["against_reference"][key] for k in tested]) * scale
                 axis.plot(t, values, color=colour, label=f"{controller}: against {1e3 * study['reference_dt_s']:g} ms")
                 axis.scatter(t[passes], values[passes], color=colour, zorder=3)  # None (no floor) draws open
                 axis.scatter(t[~passes], values[~passes], facecolors="white", edgecolors=colour, zorder=3)
                 if all(rows[k]["chaos_floor"] is not None for k in rows):
-                    axis.plot(dt, [rows[k]["chaos_floor"][floor_key] * scale for k in rows], color=colour,
+                    axis.plot(dt, [rows[k]["chaos_floor"][key] * scale for k in rows], color=colour,
                               linestyle="--", marker="x", label=f"{controller}: chaos floor (start moved 1 nm)")
         success.set(ylabel="success rate (95 % interval)", title=f"{model}: success against Δt")
         agree.set(ylabel="share of seeds with the same label", title=f"{model}: labels against the finest Δt")
