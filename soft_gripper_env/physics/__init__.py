@@ -29,7 +29,16 @@ from .scene.forces import (
     StokesDrag,
     fluid_forces,
 )
-from .scene.objects import DEFAULT_FRICTION, PAPER_BALL, PENETRATION_TOLERANCE, Capsule, ContactSettings, Sphere
+from .scene.objects import (
+    DEFAULT_FRICTION,
+    PAPER_BALL,
+    PENETRATION_ACCELERATION,
+    PENETRATION_TOLERANCE,
+    Capsule,
+    ContactSettings,
+    Sphere,
+    penetration_tolerance,
+)
 from .scene.scene import (
     INTEGRATOR_NAMES,
     NATURAL_CURVATURE_LIMIT,
@@ -48,6 +57,7 @@ __all__ = [
     "paper_finger", "Discretization", "WATER", "WATER_DENSITY", "WATER_VISCOSITY", "Current", "Fluid",
     "PAPER_DEFECTIVE_DRAG", "AddedMass", "BodyLoads", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping",
     "MorisonDrag", "StokesDrag", "fluid_forces", "PAPER_BALL", "PENETRATION_TOLERANCE", "DEFAULT_FRICTION", "Capsule",
+    "PENETRATION_ACCELERATION", "penetration_tolerance",
     "ContactSettings",
     "Sphere", "INTEGRATOR_NAMES", "NATURAL_CURVATURE_LIMIT", "NewtonSettings", "Scene", "cantilever_scene",
     "paper_scene", "check_range", "Simulator", "Trajectory", "run_ramp", "ContactReport", "RodState", "StepResult",

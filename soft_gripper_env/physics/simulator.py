@@ -27,7 +27,7 @@ from .kernels.rod_3d import elastic_scratch, rod3d_elastic, rod3d_update_frames
 from .kernels.rod_planar import planar_elastic
 from .scene.fluid import Current, CurrentBatch
 from .scene.forces import BodyLoads, ForceTerms
-from .scene.objects import ContactSettings
+from .scene.objects import ContactSettings, penetration_tolerance
 from .scene.scene import NATURAL_CURVATURE_LIMIT, Scene
 from .solvers.corrector import ContactGeometry, contact_masks, solve_with_contact
 from .solvers.gpu import GpuGrasp, GpuRods, GpuUnsupported, GraspKernelShape, RodsKernelShape, check_device
@@ -698,7 +698,8 @@ class Simulator:
                                     scene.contact.max_corrector_iterations if scene.contact.friction_passes is None
                                     else scene.contact.friction_passes),
                 first_free_node=0 if scene.gripper.finger.clamp == "free" else 2,
-                force_tolerance=float(force_tolerance), finger_length=float(length)))
+                force_tolerance=float(force_tolerance), finger_length=float(length),
+                penetration_tolerance=penetration_tolerance(dt)))
         return self._per_step_cache[dt]
 
     def implicit_step(self, state: RodState, natural_curvature: np.ndarray, dt: float, velocity_old: np.ndarray,

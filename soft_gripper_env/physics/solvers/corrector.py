@@ -1,7 +1,7 @@
 """The contact corrector: one compiled loop around Newton's method, for fixed objects and free bodies alike.
 
 The step is solved (:func:`~.newton.newton`); every free node found inside the object by more than
-:data:`~..scene.objects.PENETRATION_TOLERANCE` is held on its surface, and the step is solved again with those nodes
+:func:`~..scene.objects.penetration_tolerance` is held on its surface, and the step is solved again with those nodes
 held. The paper projects the node radially; we hold it where its path over the step (relative to the object)
 entered the surface, which is the same for a slow node and keeps a fast impact (a node 1 cm inside after a step at
 1 m/s) from stretching its edges by the projection. The reaction on a held node is the unbalanced force of its
@@ -37,7 +37,6 @@ from ..kernels.contact import ObjectView, find_penetrations, outward_normal, wit
 from ..kernels.finger_contact import find_near_fingers
 from ..kernels.local import local_array
 from ..scene.forces import ForceTerms
-from ..scene.objects import PENETRATION_TOLERANCE
 from .newton import BodyCoupling, Holds, NewtonWork, SolverArrays, SolveResult, new_work, newton
 
 
@@ -326,8 +325,8 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
     force_tolerance = solver.force_tolerance
     new_hold[:, :] = False
     stuck_again[:, :] = False
-    find_penetrations(positions, old_positions, view, held, solver.first_free_node, PENETRATION_TOLERANCE, new_hold,
-                      hold_at, found)
+    find_penetrations(positions, old_positions, view, held, solver.first_free_node, solver.penetration_tolerance,
+                      new_hold, hold_at, found)
     nearest = local_array(3)[:dim]
     normal = local_array(3)[:dim]
     reaction = local_array(3)[:dim]

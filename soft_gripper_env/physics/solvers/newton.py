@@ -71,6 +71,8 @@ class SolverArrays(NamedTuple):
     """Newton's tolerance on a force DOF [N]: a reaction pulling by less is zero to that tolerance."""
     finger_length: float
     """L [m], for the reach test of the contact search."""
+    penetration_tolerance: float
+    """How deep a free node may end a step inside the object [m] (:func:`~..scene.objects.penetration_tolerance`)."""
 
 
 class SolveResult(NamedTuple):
