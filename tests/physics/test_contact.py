@@ -203,7 +203,8 @@ def test_the_penetration_tolerance_tightens_as_the_step_squared():
 def test_short_steps_hold_free_nodes_to_their_tighter_tolerance():
     """The task's 3-D grasp (a seed's sphere, still water) closed at κ̄ rate −0.3/s with steps of 0.3125 ms: no free
     node ends a step deeper inside the sphere than that step's tolerance (16 nm). With a fixed 1 µm, nodes sat up to
-    1 µm inside on 478 of these 6,400 steps, and were caught onto the surface at ~10 m/s², twice as many times."""
+    1 µm inside on 478 of these 6,400 steps, and were caught onto the surface
+    at ~10 m/s², twice as many times."""
     from soft_gripper_env.grasp_task import GraspTask, task_episode
 
     time_step = 0.0003125
@@ -226,6 +227,30 @@ def test_short_steps_hold_free_nodes_to_their_tighter_tolerance():
         held_any |= bool(np.asarray(state.held).any())
     assert held_any
     assert deepest <= penetration_tolerance(time_step)
+
+
+def test_a_sphere_squeezed_out_between_sliding_fingertips_converges_in_the_step():
+    """The task's planar grasp of one seed (3,000,000), closing at κ̄ rate −0.3/s to −0.2: the fingertips squeeze the
+    sphere up and out, sliding on it (μ = 0.3). At 0.15625 ms no step spends the corrector's budget and none is
+    halved, and the sphere's height at 0.62 s agrees with the run at 0.625 ms to 1 mm. Before a stuck hold that
+    pulls was first made to slide, the fingertip was let go and caught again until the budget was spent, on 49 steps;
+    the sphere then rose 9 mm higher than at 0.625 ms."""
+    from soft_gripper_env.grasp_task import GraspTask, task_episode
+
+    heights = []
+    for time_step in (0.000625, 0.00015625):
+        task = GraspTask(model="planar", physics_dt=time_step)
+        sim = Simulator(task_episode(task, np.random.default_rng(3_000_000), {}).scene)
+        state = sim.initial_state()
+        for _ in range(round(0.62 / time_step)):
+            result = sim.step(state, max(-0.3 * state.time, -0.2))
+            state = result.state
+            assert result.converged.all() and result.contact.resolved.all()
+            assert result.substeps[0] == 1
+            assert result.contact.corrector_iterations[0] < ContactSettings().max_corrector_iterations
+        assert state.held.any(axis=(0, 2)).sum() >= 2  # still squeezed between fingertips
+        heights.append(state.body_position[0, 2])
+    assert abs(heights[1] - heights[0]) < 1e-3
 
 
 def test_scripted_ramp_saturates_at_the_curvature_limit():
@@ -514,10 +539,11 @@ def test_a_node_held_on_the_object_segment_reports_no_normal_reaction():
     assert np.isfinite(reaction).all() and reaction[0, 1, 0] == 0.3
 
 
-def test_the_corrector_lets_go_of_a_node_held_on_the_object_segment():
-    """The corrector's test after a solve releases a hold on the object's segment itself (a planar section shrunk to
-    a point, which has no outward normal) and marks its rod changed, whatever the hold's reaction; a hold off the
-    segment with a pushing reaction stays. Without the release the test divides 0 by 0 there."""
+def _test_one_hold(reaction_y: float, friction: float, let_go_if_pulling: bool = False):
+    """The corrector's test after a solve on two rods whose node 1 is held (stuck) at (0.01, 0) [m] with a reaction
+    ``reaction_y`` [N] along +y on it: rod 0 sees the object's segment as that very point (a planar section shrunk
+    to a point), rod 1 a circle of radius 5 mm around (0.01, −0.005), whose outward normal there is +y. Returns
+    the :class:`~soft_gripper_env.physics.solvers.corrector.ContactChanges`."""
     from soft_gripper_env.physics.kernels.contact import ObjectView
     from soft_gripper_env.physics.solvers.corrector import ContactChanges, contact_changes
     from soft_gripper_env.physics.solvers.newton import Holds, SolverArrays
@@ -525,13 +551,13 @@ def test_the_corrector_lets_go_of_a_node_held_on_the_object_segment():
     n_rods, n_nodes, dim = 2, 3, 2
     positions = np.zeros((n_rods, n_nodes, dim))
     positions[:, :, 0] = [0.0, 0.01, 0.02]
-    point = np.array([0.01, 0.0])  # node 1's position: rod 0's section is this point
-    starts = np.array([point, [0.01, -0.005]])  # rod 1 sees a circle of radius 5 mm around (0.01, −0.005)
+    point = np.array([0.01, 0.0])
+    starts = np.array([point, [0.01, -0.005]])
     ends = starts.copy()
     radii = np.array([[0.0] * n_nodes, [0.005] * n_nodes])
     stride = 3
     residual = np.zeros((n_rods, n_nodes * stride))
-    residual[:, stride * 1 + 1] = 0.2  # node 1 pushed along +y: outward from rod 1's centre (and pulling nowhere)
+    residual[:, stride * 1 + 1] = reaction_y
     held = np.zeros((n_rods, n_nodes), dtype=np.bool_)
     held[:, 1] = True
     holds = Holds(held, np.zeros((n_rods, n_nodes, 3)), np.zeros((n_rods, dim, 3)), np.zeros_like(held),
@@ -541,12 +567,33 @@ def test_the_corrector_lets_go_of_a_node_held_on_the_object_segment():
                           np.ones((n_rods, n_nodes * stride), dtype=np.bool_), np.ones(6), 10, 1, 5, 2, 1, 1e-6, 0.1,
                           1e-6)
     view = ObjectView(starts, ends, radii, np.ones(n_rods, dtype=np.bool_), np.zeros((n_rods, dim)))
-    changes = ContactChanges(np.zeros((n_rods, n_nodes), dtype=np.bool_), np.zeros((n_rods, n_nodes), dtype=np.bool_),
-                             positions.copy(), np.zeros((n_rods, n_nodes), dtype=np.bool_),
-                             np.zeros((n_rods, n_nodes, dim)), np.zeros((n_rods, n_nodes), dtype=np.bool_),
-                             np.zeros(n_rods, dtype=np.bool_))
-    contact_changes(positions, positions.copy(), positions.copy(), residual, holds, view, np.full(n_rods, np.inf),
+    flags = np.zeros((5, n_rods, n_nodes), dtype=np.bool_)
+    flags[4] = let_go_if_pulling
+    changes = ContactChanges(flags[0], flags[1], positions.copy(), flags[2], np.full((n_rods, n_nodes, dim), np.nan),
+                             flags[3], np.zeros(n_rods, dtype=np.bool_), flags[4])
+    contact_changes(positions, positions.copy(), positions.copy(), residual, holds, view, np.full(n_rods, friction),
                     solver, True, True, changes, np.empty(n_rods, dtype=np.int64))
+    return changes
+
+
+def test_the_corrector_lets_go_of_a_node_held_on_the_object_segment():
+    """The corrector's test after a solve releases a hold on the object's segment itself (a planar section shrunk to
+    a point, which has no outward normal) and marks its rod changed, whatever the hold's reaction; a hold off the
+    segment with a pushing reaction stays. Without the release the test divides 0 by 0 there."""
+    changes = _test_one_hold(0.2, np.inf)
     assert changes.adhesive[0, 1] and changes.changed[0]
     assert not changes.adhesive[1].any() and not changes.changed[1]
-    assert np.isfinite(changes.friction).all()
+
+
+@pytest.mark.parametrize("friction, let_go_if_pulling, slides", [(0.3, False, True), (0.0, False, True),
+                                                                 (0.3, True, False), (np.inf, False, False)])
+def test_a_stuck_hold_that_pulls_slides_before_it_is_let_go(friction, let_go_if_pulling, slides):
+    """A stuck hold whose normal reaction pulls (0.2 N into the object) first slides, without friction, unless it
+    was caught in this step or already made to slide by a pull (then it is let go), or always sticks (μ = ∞: let
+    go)."""
+    changes = _test_one_hold(-0.2, friction, let_go_if_pulling)
+    assert changes.changed[1]
+    assert changes.slide[1, 1] == slides and changes.adhesive[1, 1] == (not slides)
+    if slides:
+        assert changes.let_go_if_pulling[1, 1]  # a second pull lets it go
+        np.testing.assert_array_equal(changes.friction[1, 1], 0.0)

@@ -7,7 +7,9 @@ entered the surface, which is the same for a slow node and keeps a fast impact (
 1 m/s) from stretching its edges by the projection. The reaction on a held node is the unbalanced force of its
 equation of motion, R = M·a − f. Contact is compression-only: a held node whose normal reaction R·n turns adhesive
 (pulls it into the object, R·n < 0) is released (a reaction pulling by less than Newton's force tolerance is zero to
-that tolerance and stays) and the step solved again, from the last solution.
+that tolerance and stays) and the step solved again, from the last solution. Every step starts with its holds
+stuck, and a stuck hold's reaction also stops the node along the surface, which can pull it in: such a hold (one
+held since the step began) slides first, and is let go if it still pulls.
 
 Contact has Coulomb friction μ (the object's): a held node is stuck to a point of the object while its tangential
 reaction is within μ·R_n, and otherwise slides along the surface against a friction μ·R_n opposite to its slip
@@ -82,6 +84,10 @@ class ContactChanges(NamedTuple):
     """Sliding nodes that stick again where they are, (R, N) bool (their hold points are in ``hold_at``)."""
     changed: np.ndarray
     """Rods with any of these, (R,) bool."""
+    let_go_if_pulling: np.ndarray
+    """Holds let go at once if their normal reaction pulls, (R, N) bool, kept from one solve of a step to the next:
+    nodes caught in this step, and nodes a pull has already made slide in it. Any other stuck hold that pulls slides
+    first."""
 
 
 class CorrectorWork(NamedTuple):
@@ -105,6 +111,8 @@ class CorrectorWork(NamedTuple):
     """:attr:`ContactChanges.friction` [N], (R, N, D)."""
     stuck_again: np.ndarray
     """:attr:`ContactChanges.stuck_again`, (R, N) bool."""
+    let_go_if_pulling: np.ndarray
+    """:attr:`ContactChanges.let_go_if_pulling`, (R, N) bool."""
     anchors: np.ndarray
     """Where a free body's held nodes stuck last [m], (R, N, D)."""
     reach: np.ndarray
@@ -126,8 +134,8 @@ def corrector_work(q, dim, n_fingers, free_body, finger_contact):
     points = np.empty((2, n_rods, n_nodes, dim))
     n_bases = n_rods // n_fingers if free_body and dim == 2 else 0
     return CorrectorWork(np.empty(n_rods, dtype=np.bool_), np.empty((n_rods, n_nodes * stride), dtype=np.bool_),
-                         np.zeros((n_rods, dim)), flags[0], flags[1], flags[2], points[0], flags[3], points[1],
-                         np.empty(n_rods, dtype=np.bool_), np.empty(n_rods, dtype=np.int64),
+                         np.zeros((n_rods, dim)), flags[0], flags[1], flags[2], points[0], flags[3], flags[4],
+                         points[1], np.empty(n_rods, dtype=np.bool_), np.empty(n_rods, dtype=np.int64),
                          np.empty((n_bases, 6, 6)), new_work(q, dim, n_fingers, free_body, True, finger_contact))
 
 
@@ -181,8 +189,9 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
     work.slide[:, :] = False
     work.friction[:, :, :] = 0.0
     work.stuck_again[:, :] = False
+    work.let_go_if_pulling[:, :] = False
     changes = ContactChanges(work.adhesive, new_hold, hold_at, work.slide, work.friction, work.stuck_again,
-                             result.changed)
+                             result.changed, work.let_go_if_pulling)
     positions, old_positions = q[:, :, :dim], step.q_old[:, :, :dim]
     result.corrector[:] = 0
     result.residual[:, :] = 0.0
@@ -303,12 +312,15 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
     - ``adhesive``: held nodes whose normal reaction R_n pulls by more than Newton's force tolerance
       ``solver.force_tolerance`` [N] (a reaction is known to that tolerance: one pulling by less is zero, and
       releasing it would only make the corrector cycle), and held nodes on the segment itself, where a planar
-      finger's section of a sphere that has left its plane has shrunk to a point;
+      finger's section of a sphere that has left its plane has shrunk to a point. A stuck hold that pulls is let go
+      only if it was caught in this step or a pull already made it slide (``let_go_if_pulling``); otherwise it
+      slides first, without friction, within the budget and for finite μ;
     - ``new_hold``: free nodes that penetrate the object, with their hold points in ``hold_at``
       (:func:`~..kernels.contact.find_penetrations`);
     - ``slide`` and ``friction``: a stuck node whose tangential reaction exceeds μ·R_n slides, against a friction of
       μ·R_n along that reaction; a sliding node keeps sliding while it has moved from its anchor against its
-      friction, which becomes μ·R_n against that motion, and otherwise is ``stuck_again`` where it is.
+      friction, which becomes μ·R_n against that motion, and otherwise is ``stuck_again`` on the surface where it
+      is.
       Only within the budget (``within_budget``);
     - ``changed``: rods with any of these, or, while ``settle_friction``, whose friction moved by more than
       :data:`FRICTION_TOLERANCE` (:attr:`~..scene.objects.ContactSettings.friction_passes`).
@@ -319,7 +331,8 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
     adhesive, new_hold, changed = changes.adhesive, changes.new_hold, changes.changed
     slide, new_friction, stuck_again, hold_at = changes.slide, changes.friction, changes.stuck_again, changes.hold_at
     held, sliding, old_friction = holds.held, holds.sliding, holds.friction
-    starts, ends = view.starts, view.ends
+    let_go_if_pulling = changes.let_go_if_pulling
+    starts, ends, radii = view.starts, view.ends, view.radii
     n_rods, n_nodes, dim = positions.shape
     stride = residual.shape[1] // n_nodes
     force_tolerance = solver.force_tolerance
@@ -349,6 +362,19 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
                 reaction[d] = residual[r, stride * i + d]
                 normal_reaction += reaction[d] * normal[d]
             if normal_reaction < -force_tolerance:
+                if within_budget and not sliding[r, i] and not let_go_if_pulling[r, i] and mu != np.inf:
+                    # Every step starts with its holds stuck, and stopping a node that slid along the surface can
+                    # pull it in: let go, it would be caught again at its entry point and let go, until the budget
+                    # is spent and the step halved (ever more often as Δt falls). Only the normal reaction of a
+                    # hold free along the surface says whether contact pulls, so such a node slides first (without
+                    # friction: μ·R_n is zero while R_n pulls). A node caught in this step is let go at once: a
+                    # fast impact's entry points are no sliding contact.
+                    slide[r, i] = True
+                    let_go_if_pulling[r, i] = True  # once: stuck again, it would slide again, and so on
+                    changed[r] = True
+                    for d in range(dim):
+                        new_friction[r, i, d] = 0.0
+                    continue
                 adhesive[r, i] = True
                 changed[r] = True
                 continue
@@ -383,8 +409,11 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
             if against > 0.0:  # its friction no longer opposes its motion: it has stopped and turned back
                 stuck_again[r, i] = True
                 changed[r] = True
+                # On the surface where it is: a sliding node moved along the tangent plane of its solve, off a
+                # curved surface by slip²/2r (µm at 10 ms), and a stuck hold must not keep it inside.
+                radius = radii[r, i]
                 for d in range(dim):
-                    hold_at[r, i, d] = positions[r, i, d]
+                    hold_at[r, i, d] = nearest[d] + radius * normal[d]
                 continue
             slide[r, i] = True
             old_size = 0.0
@@ -427,6 +456,7 @@ def update_holds(within_budget, holds, changes, again, n_fingers, whole_gripper)
     solution was found with, so that the reactions it reports (its friction among them) are those of its own
     solution, whatever the other grippers of its batch do."""
     held, sliding, adhesive, new_hold = holds.held, holds.sliding, changes.adhesive, changes.new_hold
+    let_go_if_pulling = changes.let_go_if_pulling
     for r in range(held.shape[0]):
         updated = again[r]
         if whole_gripper:
@@ -437,6 +467,7 @@ def update_holds(within_budget, holds, changes, again, n_fingers, whole_gripper)
             continue
         for i in range(held.shape[1]):
             held[r, i] = (held[r, i] and not (within_budget and adhesive[r, i])) or new_hold[r, i]
+            let_go_if_pulling[r, i] = let_go_if_pulling[r, i] or new_hold[r, i]
             sliding[r, i] = held[r, i] and not new_hold[r, i] and changes.slide[r, i]
             for d in range(holds.friction.shape[2]):
                 holds.friction[r, i, d] = changes.friction[r, i, d] if sliding[r, i] else 0.0

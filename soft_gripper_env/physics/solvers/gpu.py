@@ -494,7 +494,7 @@ def _build_grasp_kernel(shape: GraspKernelShape):
                         body[15], body[16], body[17])
         # the scratch (stepping.step_work's, for one gripper), in the thread's own arrays
         flags = cuda.local.array((8, F), boolean)
-        node_flags = cuda.local.array((6, F, N), boolean)
+        node_flags = cuda.local.array((7, F, N), boolean)
         counts = cuda.local.array((3, F), int64)
         ratios = cuda.local.array((3, F), float64)
         for f in range(F):  # new_work's zeros: nothing rubs or touches before a solve says so
@@ -526,7 +526,8 @@ def _build_grasp_kernel(shape: GraspKernelShape):
             flags[3], ratios[1])
         points = cuda.local.array((4, F, N, D), float64)
         corrector = CorrectorWork(flags[4], cuda.local.array((F, n), boolean), cuda.local.array((F, D), float64),
-                                  node_flags[1], node_flags[2], node_flags[3], points[0], node_flags[4], points[1],
+                                  node_flags[1], node_flags[2], node_flags[3], points[0], node_flags[4], node_flags[6],
+                                  points[1],
                                   flags[5], counts[0],
                                   cuda.local.array((1, 6, 6), float64)[:1 if planar_free else 0], newton)
         gripper = cuda.local.array(1, int64)
