@@ -194,3 +194,33 @@ def test_the_physics_probe_refuses_steps_it_cannot_compare(capsys):
         with pytest.raises(SystemExit):
             probe.main(["--dts", dts])
         assert message in capsys.readouterr().err
+
+
+def test_step_traces_halve_the_gap_with_the_step_before_contact(tmp_path):
+    """Before the fingers touch (the first 0.15 s), backward Euler is first order: the median gap of the sphere's
+    place between 5 and 2.5 ms is twice that between 2.5 and 1.25 ms (to 25 %), open loop and with the controller
+    alike; the traces, the JSON and the figure are written."""
+    from benchmarks import step_traces
+
+    for controller in step_traces.CONTROLLERS:
+        summary = step_traces.main(["--controller", controller, "--seeds", "2", "--dts", "0.005,0.0025,0.00125",
+                                    "--until", "0.15", "--workers", "1", "--json", str(tmp_path / "t.json"),
+                                    "--plot", str(tmp_path / "t.png")])
+        coarse, fine = (np.asarray(summary["median_gaps_m"][pair]) for pair in ("0.005-0.0025", "0.0025-0.00125"))
+        assert summary["times_s"] == pytest.approx([0.05, 0.1, 0.15])
+        assert np.all(fine > 0.0)
+        assert coarse[-1] / fine[-1] == pytest.approx(2.0, rel=0.25)
+        assert np.asarray(summary["traces_m"]["0.005"]).shape == (3, 2, 3)
+        assert json.loads((tmp_path / "t.json").read_text())["controller"] == controller
+        assert (tmp_path / "t.png").stat().st_size > 10_000
+
+
+def test_step_traces_refuse_what_they_cannot_compare(capsys):
+    from benchmarks import step_traces
+
+    for options, message in ((["--dts", "0.01"], "at least two steps"), (["--dts", "0.01,0.003"], "divide the"),
+                             (["--until", "20"], "--until"), (["--friction", "-1"], "--friction"),
+                             (["--controller", "ramp"], "--controller")):
+        with pytest.raises(SystemExit):
+            step_traces.main(options)
+        assert message in capsys.readouterr().err
