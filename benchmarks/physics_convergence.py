@@ -120,6 +120,21 @@ def plot(summary: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def parse_steps(parser: argparse.ArgumentParser, text: str, at_least: int) -> list[float]:
+    """The ``--dts`` option's steps [s], coarsest first: at least ``at_least`` of them, each in (0, 0.01] s and
+    dividing the task's control interval of 0.05 s; otherwise the parser's error, naming the option."""
+    words = ("two", "three", "four")
+    try:
+        dts = sorted({float(v) for v in text.split(",")}, reverse=True)
+    except ValueError:
+        parser.error(f"--dts = {text!r} is not a comma-separated list of steps [s]")
+    if len(dts) < at_least or any(not 0.0 < dt <= 0.01 for dt in dts):
+        parser.error(f"--dts = {text!r}: at least {words[at_least - 2]} steps, each in (0, 0.01] s")
+    if any(abs(0.05 / dt - round(0.05 / dt)) > 1e-9 for dt in dts):
+        parser.error(f"--dts = {text!r}: each step must divide the control interval, 0.05 s")
+    return dts
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--model", choices=("3d", "planar"), default="3d")
@@ -131,14 +146,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--json", type=Path, default=Path("out") / "physics_convergence.json")
     parser.add_argument("--plot", type=Path, default=Path("out") / "physics_convergence.png")
     args = parser.parse_args(argv)
-    try:
-        dts = sorted({float(v) for v in args.dts.split(",")}, reverse=True)
-    except ValueError:
-        parser.error(f"--dts = {args.dts!r} is not a comma-separated list of steps [s]")
-    if len(dts) < 3 or any(not 0.0 < dt <= 0.01 for dt in dts):
-        parser.error(f"--dts = {args.dts!r}: at least three steps, each in (0, 0.01] s")
-    if any(abs(0.05 / dt - round(0.05 / dt)) > 1e-9 for dt in dts):
-        parser.error(f"--dts = {args.dts!r}: each step must divide the control interval, 0.05 s")
+    dts = parse_steps(parser, args.dts, 3)
     if args.seeds < 1 or args.workers < 1:
         parser.error("--seeds and --workers must be at least 1")
     seeds = list(range(args.seed, args.seed + args.seeds))

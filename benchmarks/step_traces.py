@@ -26,6 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ._timing import save_plot
+from .physics_convergence import parse_steps
 
 DEFAULT_DTS = (0.00125, 0.000625, 0.0003125, 0.00015625)
 CONTROLLERS = ("reactive", "closing")
@@ -107,14 +108,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--json", type=Path, default=Path("out") / "step_traces.json")
     parser.add_argument("--plot", type=Path, default=Path("out") / "step_traces.png")
     args = parser.parse_args(argv)
-    try:
-        dts = sorted({float(v) for v in args.dts.split(",")}, reverse=True)
-    except ValueError:
-        parser.error(f"--dts = {args.dts!r} is not a comma-separated list of steps [s]")
-    if len(dts) < 2 or any(not 0.0 < dt <= 0.01 for dt in dts):
-        parser.error(f"--dts = {args.dts!r}: at least two steps, each in (0, 0.01] s")
-    if any(abs(0.05 / dt - round(0.05 / dt)) > 1e-9 for dt in dts):
-        parser.error(f"--dts = {args.dts!r}: each step must divide the control interval, 0.05 s")
+    dts = parse_steps(parser, args.dts, 2)
     if not 0.05 <= args.until <= 10.0:
         parser.error(f"--until = {args.until!r} s is outside the allowed range [0.05, 10] s")
     if args.friction is not None and not args.friction >= 0.0:
