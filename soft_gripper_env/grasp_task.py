@@ -33,6 +33,7 @@ from .physics import (
     paper_scene,
     put_grippers,
     take_grippers,
+    without_material_damping,
 )
 from .physics.solvers.gpu import cuda_module
 
@@ -399,9 +400,11 @@ class TaskEpisode(NamedTuple):
 def task_episode(task: GraspTask, rng: np.random.Generator, options: dict) -> TaskEpisode:
     """One episode: its scene and specimen drawn from the task's ranges by ``rng``, with ``options`` (checked)
     fixing any of them; or the paper's exact scene (its fixed ball, Stokes drag, no buoyancy, no gust, nothing
-    fragile) for ``scene="paper"``, with the task's gripper (the paper's, unless the task names another)."""
+    fragile) for ``scene="paper"``, with the task's gripper (the paper's, unless the task names another), its
+    material purely elastic as the paper's."""
     if options.get("scene") == "paper":
-        return TaskEpisode(replace(paper_scene(task.model, grasped_object=PAPER_BALL), gripper=task.gripper,
+        gripper = without_material_damping(task.gripper)
+        return TaskEpisode(replace(paper_scene(task.model, grasped_object=PAPER_BALL), gripper=gripper,
                                    time_step=task.physics_dt, newton=task.newton), math.inf)
     # every draw is made, fixed or not, so that fixing one quantity leaves the others' draws unchanged
     radius = rng.uniform(*task.object_radius)

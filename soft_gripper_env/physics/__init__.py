@@ -8,12 +8,14 @@ per-rod functions) → :mod:`.solvers` (Newton, the contact corrector, the integ
 from .kernels.assembly import StepContext, evaluate_force
 from .scene.design import (
     ELASTOSIL_MA_4601,
+    SILICONE_RETARDATION_TIME,
     SOFT_TRANSLUCENT_SILICONE,
     FingerDesign,
     GripperDesign,
     Material,
     linear_taper,
     paper_finger,
+    without_material_damping,
 )
 from .scene.discretization import Discretization
 from .scene.fluid import WATER, WATER_DENSITY, WATER_VISCOSITY, Current, Fluid
@@ -53,7 +55,8 @@ from .solvers.gpu import GpuUnavailable, GpuUnsupported, check_device
 from .solvers.records import ContactReport, RodState, StepResult, put_grippers, take_grippers
 
 __all__ = [
-    "ELASTOSIL_MA_4601", "SOFT_TRANSLUCENT_SILICONE", "FingerDesign", "GripperDesign", "Material", "linear_taper",
+    "ELASTOSIL_MA_4601", "SILICONE_RETARDATION_TIME", "SOFT_TRANSLUCENT_SILICONE", "FingerDesign", "GripperDesign",
+    "Material", "linear_taper", "without_material_damping",
     "paper_finger", "Discretization", "WATER", "WATER_DENSITY", "WATER_VISCOSITY", "Current", "Fluid",
     "PAPER_DEFECTIVE_DRAG", "AddedMass", "BodyLoads", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping",
     "MorisonDrag", "StokesDrag", "fluid_forces", "PAPER_BALL", "PENETRATION_TOLERANCE", "DEFAULT_FRICTION", "Capsule",

@@ -46,6 +46,8 @@ class RodArrays(NamedTuple):
     """GJ at each node [N·m²], (N,)."""
     voronoi_length: np.ndarray
     """Rest length attributed to each node [m], (N,)."""
+    retardation_time: float
+    """The material's Kelvin–Voigt retardation time τ [s]."""
     fingers: FingerContact
     """The constants of contact between a gripper's fingers (:class:`~.finger_contact.FingerContact`)."""
     tangent: np.ndarray
@@ -60,18 +62,22 @@ class RodArrays(NamedTuple):
         """The arrays of ``disc`` with the contact between its fingers, without frames (a state's are put in with
         ``_replace``)."""
         return cls(disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness, disc.twist_stiffness,
-                   disc.voronoi_length, fingers, np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))
+                   disc.voronoi_length, disc.retardation_time, fingers, np.empty((0, 0, 3)), np.empty((0, 0, 3)),
+                   np.empty((0, 0)))
 
 
-N_DESIGN_FIELDS = 6
+N_DESIGN_FIELDS = 7
 """The fields of :class:`RodArrays` that a design fixes, which come before a state's frames."""
+FINGERS_FIELD = RodArrays._fields.index("fingers")
+"""Where the finger contact's constants are among the fields of :class:`RodArrays` (for its plain tuple)."""
 
 
 @njit(cache=True, nogil=True)
 def named_rods(rods):
     """:class:`RodArrays` from its fields as plain tuples (:func:`~..solvers.newton.plain`), named again, the
     finger contact's too."""
-    return RodArrays(rods[0], rods[1], rods[2], rods[3], rods[4], FingerContact(*rods[5]), rods[6], rods[7], rods[8])
+    return RodArrays(rods[0], rods[1], rods[2], rods[3], rods[4], rods[5], FingerContact(*rods[6]), rods[7], rods[8],
+                     rods[9])
 
 
 class StepInputs(NamedTuple):
@@ -122,24 +128,42 @@ def external_forces(positions, start_positions, velocities, accelerations, water
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def assemble_rod(r, q, step, rods, terms, hessian, force, band, velocity, acceleration, elastic, fingers):
+def assemble_rod(r, q, step, rods, terms, hessian, force, band, strained, velocity, acceleration, elastic, fingers):
     """Overwrites ``force`` (N, S) with rod r's total force [N] at coordinates ``q`` (R, N, S) of the backward-Euler
     step ``step`` (:class:`StepInputs`), and ``band`` (n, kd+1) with −∂f/∂q (when ``hessian``). Work arrays, passed
-    in so that it allocates nothing (a GPU thread has no heap to allocate from): ``velocity`` and ``acceleration``
+    in so that it allocates nothing (a GPU thread has no heap to allocate from): ``strained`` (N, S) (the
+    coordinates the elastic force is evaluated at, with material damping), ``velocity`` and ``acceleration``
     (N, D), the 3-D energy's buffer ``elastic`` (:func:`~.rod_3d.elastic_scratch`; empty in the planar model) and the
     finger contact's ``fingers`` (:func:`~.finger_contact.finger_scratch`; empty without it). ``rods`` is
-    :class:`RodArrays`, ``terms`` the scene's :class:`~..scene.forces.ForceTerms`. Returns its elastic energy [J]."""
+    :class:`RodArrays`, ``terms`` the scene's :class:`~..scene.forces.ForceTerms`. Returns its elastic energy [J]
+    (at ``strained`` with material damping).
+
+    Material damping (Kelvin–Voigt, stress E·(ε + τ·ε̇)) adds −τ·K·v to the elastic force f(q), K = −∂f/∂q. With the
+    step's v = (q − q_old)/Δt that is, to first order in τ·v, the elastic force at q* = q + (τ/Δt)·(q − q_old): one
+    evaluation of the same elastic kernel, whose Jacobian is (1 + τ/Δt)·∂f/∂q(q*). A mode of angular frequency ω
+    gets the damping ratio τ·ω/2, and the actuation's κ̄ is left out of it (it damps the material's strain rate)."""
     force[:] = 0.0
     band[:] = 0.0
     stride = q.shape[2]
+    viscous = rods.retardation_time / step.dt
+    at = q[r]
+    if viscous != 0.0:
+        at = strained
+        for i in range(q.shape[1]):
+            for k in range(stride):
+                strained[i, k] = q[r, i, k] + viscous * (q[r, i, k] - step.q_old[r, i, k])
     if stride == 2:
-        energy = planar_elastic_rod(q[r], rods.rest_length, rods.stretch_stiffness, rods.bend_stiffness,
+        energy = planar_elastic_rod(at, rods.rest_length, rods.stretch_stiffness, rods.bend_stiffness,
                                     rods.voronoi_length, step.natural_curvature[r], force, band, hessian)
     else:
-        energy = rod3d_elastic_rod(q[r], rods.tangent[r], rods.director[r], rods.reference_twist[r],
+        energy = rod3d_elastic_rod(at, rods.tangent[r], rods.director[r], rods.reference_twist[r],
                                    rods.rest_length, rods.stretch_stiffness, rods.bend_stiffness,
                                    rods.twist_stiffness, rods.voronoi_length, step.natural_curvature[r], force,
                                    band, hessian, elastic)
+    if viscous != 0.0 and hessian:
+        for j in range(band.shape[0]):
+            for k in range(band.shape[1]):
+                band[j, k] *= 1.0 + viscous
     n_nodes, dim = velocity.shape
     dt = step.dt
     for i in range(n_nodes):
@@ -160,10 +184,12 @@ def assemble(q, step, rods, terms, hessian, force, band):
     """Every rod's force (R, N, S) [N] and −∂f/∂q (R, n, kd+1), written into ``force`` and ``band``."""
     n_nodes = q.shape[1]
     motion = np.empty((2, n_nodes, step.water.shape[1]))  # velocity and acceleration
+    strained = np.empty((n_nodes, q.shape[2]))
     elastic = elastic_scratch(n_nodes if q.shape[2] == 4 else 0)
     fingers = finger_scratch(rods.fingers.eligible.shape[0] if step.near.size > 0 else 0, n_nodes)
     for r in range(q.shape[0]):
-        assemble_rod(r, q, step, rods, terms, hessian, force[r], band[r], motion[0], motion[1], elastic, fingers)
+        assemble_rod(r, q, step, rods, terms, hessian, force[r], band[r], strained, motion[0], motion[1], elastic,
+                     fingers)
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,5 +220,5 @@ def evaluate_force(model: ForceModel, disc: Discretization, fluid: Fluid, ctx: S
                     disc.stride, force, system_band)
 
 
-__all__ = ["RodArrays", "N_DESIGN_FIELDS", "named_rods", "StepInputs", "external_forces_rod", "external_forces",
-           "assemble_rod", "assemble", "StepContext", "evaluate_force"]
+__all__ = ["RodArrays", "N_DESIGN_FIELDS", "FINGERS_FIELD", "named_rods", "StepInputs", "external_forces_rod",
+           "external_forces", "assemble_rod", "assemble", "StepContext", "evaluate_force"]

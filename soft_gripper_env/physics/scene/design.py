@@ -8,7 +8,7 @@ Derived quantities (stiffnesses, masses) are computed from these (:mod:`.discret
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -20,17 +20,23 @@ ClampConvention = Literal["paper", "accurate", "free"]
 
 @dataclass(frozen=True)
 class Material:
-    """An elastomer, treated as linear elastic and incompressible (shear modulus E/3)."""
+    """An elastomer, treated as incompressible (shear modulus E/3) and linear viscoelastic of the Kelvin–Voigt kind:
+    stress E·(ε + τ·ε̇) in stretch, bend and twist alike."""
 
     name: str
     youngs_modulus: float
     """Young's modulus E [Pa]."""
     density: float
     """Mass density ρ [kg/m³]."""
+    retardation_time: float = 0.0
+    """Kelvin–Voigt retardation time τ [s]: the loss factor at angular frequency ω is τ·ω, so a mode of frequency ω
+    has the damping ratio τ·ω/2. 0 is purely elastic."""
 
     def __post_init__(self) -> None:
         check_range("Material", "youngs_modulus", self.youngs_modulus, "Pa", 0.0)
         check_range("Material", "density", self.density, "kg/m³", 0.0)
+        check_range("Material", "retardation_time", self.retardation_time, "s", 0.0, 1.0, low_inclusive=True)
+        object.__setattr__(self, "retardation_time", float(self.retardation_time))  # one compiled type for it
 
     @property
     def shear_modulus(self) -> float:
@@ -38,10 +44,18 @@ class Material:
         return self.youngs_modulus / 3.0
 
 
-ELASTOSIL_MA_4601 = Material("Elastosil MA 4601", youngs_modulus=386.66e3, density=1130.0)
+SILICONE_RETARDATION_TIME = 8e-3
+"""The Kelvin–Voigt retardation time given to the silicones here [s]: a loss factor τ·ω of 0.1 at 2 Hz, the paper
+finger's first bending mode in water. Silicone rubbers show loss factors of order 0.05–0.2 at a few hertz; this value
+is representative, not measured on these materials (``docs/model.md`` §5)."""
 
 
-SOFT_TRANSLUCENT_SILICONE = Material("Soft Translucent silicone", youngs_modulus=169.56e3, density=1100.0)
+ELASTOSIL_MA_4601 = Material("Elastosil MA 4601", youngs_modulus=386.66e3, density=1130.0,
+                             retardation_time=SILICONE_RETARDATION_TIME)
+
+
+SOFT_TRANSLUCENT_SILICONE = Material("Soft Translucent silicone", youngs_modulus=169.56e3, density=1100.0,
+                                     retardation_time=SILICONE_RETARDATION_TIME)
 
 
 def linear_taper(base_radius: float, tip_radius: float, n_nodes: int) -> tuple[float, ...]:
@@ -129,6 +143,13 @@ class GripperDesign:
         return len(self.finger_angles)
 
 
+def without_material_damping(gripper: GripperDesign) -> GripperDesign:
+    """``gripper`` with its fingers' material purely elastic (retardation time 0), as the paper has it."""
+    finger = gripper.finger
+    material = replace(finger.material, retardation_time=0.0)
+    return replace(gripper, finger=replace(finger, material=material))
+
+
 PAPER_RADIUS = 0.02
 """Finger cross-section radius of the paper's scene [m]."""
 
@@ -140,5 +161,5 @@ def paper_finger(material: Material = ELASTOSIL_MA_4601, variable_stiffness: boo
     return FingerDesign(length=0.2, n_nodes=n_nodes, radius=radius, material=material, clamp=clamp)
 
 
-__all__ = ["ClampConvention", "Material", "ELASTOSIL_MA_4601", "SOFT_TRANSLUCENT_SILICONE", "linear_taper",
-           "FingerDesign", "GripperDesign", "PAPER_RADIUS", "paper_finger"]
+__all__ = ["ClampConvention", "Material", "SILICONE_RETARDATION_TIME", "ELASTOSIL_MA_4601", "SOFT_TRANSLUCENT_SILICONE",
+           "linear_taper", "FingerDesign", "GripperDesign", "without_material_damping", "PAPER_RADIUS", "paper_finger"]

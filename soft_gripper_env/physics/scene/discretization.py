@@ -54,6 +54,8 @@ class Discretization:
     """GJ at each node [N·m²], (N,); used at interior nodes (3-D only)."""
     voronoi_length: np.ndarray
     """Rest length attributed to each node [m], (N,)."""
+    retardation_time: float
+    """The material's Kelvin–Voigt retardation time τ [s] (:attr:`~.design.Material.retardation_time`)."""
     dof_mass: np.ndarray
     """Inertia of each DOF of one rod [kg or kg·m²], (N·S,)."""
     free: np.ndarray
@@ -133,5 +135,6 @@ class Discretization:
                    stretch_stiffness=material.youngs_modulus * math.pi * edge_radius**2,
                    bend_stiffness=material.youngs_modulus * math.pi * radius**4 / 4.0,
                    twist_stiffness=material.shear_modulus * math.pi * radius**4 / 2.0,
-                   voronoi_length=voronoi, dof_mass=dof_mass.ravel(), free=free.ravel(),
+                   voronoi_length=voronoi, retardation_time=material.retardation_time, dof_mass=dof_mass.ravel(),
+                   free=free.ravel(),
                    residual_scale=residual_scale.ravel(), rest_q=rest, finger_directions=directions)

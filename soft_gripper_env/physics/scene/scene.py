@@ -14,7 +14,15 @@ from typing import Literal
 
 import numpy as np
 
-from .design import ELASTOSIL_MA_4601, ClampConvention, FingerDesign, GripperDesign, Material, paper_finger
+from .design import (
+    ELASTOSIL_MA_4601,
+    ClampConvention,
+    FingerDesign,
+    GripperDesign,
+    Material,
+    paper_finger,
+    without_material_damping,
+)
 from .discretization import Discretization
 from .fluid import WATER, Fluid
 from .forces import ForceModel, Gravity, fluid_forces
@@ -132,14 +140,15 @@ def paper_scene(model: RodModel = "planar", *, material: Material = ELASTOSIL_MA
     at water's viscosity and no buoyancy; ``"air"`` has no fluid force; ``"water"`` has buoyancy, Morison drag and
     added mass. A tuple of force models replaces them, e.g. ``(PAPER_DEFECTIVE_DRAG,)``. ``grasped_object`` adds
     contact, e.g. with the paper's fixed ball :data:`~.objects.PAPER_BALL`; the contact is on the fingers' centre
-    lines, and the fingers pass through each other, as the paper has it
-    (``ContactSettings(finger_thickness=False, finger_contact_stiffness=0)``).
+    lines and the fingers pass through each other (``ContactSettings(finger_thickness=False,
+    finger_contact_stiffness=0)``), and the material is purely elastic (its retardation time set to 0), as the paper
+    has it.
     """
 
     forces: tuple[ForceModel, ...] = (Gravity(),)
     forces += tuple(medium) if isinstance(medium, tuple) else fluid_forces(medium)
-    finger = paper_finger(material, variable_stiffness)
-    return Scene(gripper=GripperDesign(finger), forces=forces, model=model, grasped_object=grasped_object,
+    gripper = without_material_damping(GripperDesign(paper_finger(material, variable_stiffness)))
+    return Scene(gripper=gripper, forces=forces, model=model, grasped_object=grasped_object,
                  contact=ContactSettings(finger_thickness=False, finger_contact_stiffness=0.0))
 
 

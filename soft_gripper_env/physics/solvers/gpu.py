@@ -41,7 +41,7 @@ import numpy as np
 from numba import njit
 from numba.core import types
 
-from ..kernels.assembly import N_DESIGN_FIELDS, StepInputs, named_rods
+from ..kernels.assembly import FINGERS_FIELD, N_DESIGN_FIELDS, StepInputs, named_rods
 from ..kernels.finger_contact import finger_scratch_size
 from ..kernels.forces import project_water
 from ..kernels.local import local_array
@@ -313,8 +313,8 @@ def _build_rods_kernel(shape: RodsKernelShape):
         vector = cuda.local.array(1, float64)[:0]
         matrix = cuda.local.array((1, 1), float64)[:0]
         tensor = cuda.local.array((1, 1, 6), float64)[:0]
-        work = NewtonWork(cuda.local.array((N, S), float64), motion[0], motion[1], elastic,
-                          cuda.local.array(finger_size or 1, float64)[:finger_size],
+        work = NewtonWork(cuda.local.array((N, S), float64), cuda.local.array((N, S), float64), motion[0], motion[1],
+                          elastic, cuda.local.array(finger_size or 1, float64)[:finger_size],
                           cuda.local.array((F, n, band), float64), tensor, cuda.local.array((F, n), float64),
                           tensor, tensor, matrix,
                           cuda.local.array((F, n), float64)[:contact_fingers], ratios[1], flags[3],
@@ -371,8 +371,8 @@ class GpuRods:
         self.cuda = None if host else cuda_module()
         self.shape = shape
         design = rods[:N_DESIGN_FIELDS]
-        fingers = design[5]
-        self.rods = _on_device(self.cuda, design[:5], False) + (
+        fingers = design[FINGERS_FIELD]
+        self.rods = _on_device(self.cuda, design[:FINGERS_FIELD], False) + (
             (float(fingers[0]), float(fingers[1])) + _on_device(self.cuda, fingers[2:], False),)
         self.terms = _on_device(self.cuda, tuple(terms), False)
         solver_arrays = SolverArrays(*solver)
@@ -512,7 +512,8 @@ def _build_grasp_kernel(shape: GraspKernelShape):
             for j in range(n):
                 rod_steps[1, f, j] = 0.0
         newton = NewtonWork(
-            cuda.local.array((N, S), float64), cuda.local.array((N, D), float64), cuda.local.array((N, D), float64),
+            cuda.local.array((N, S), float64), cuda.local.array((N, S), float64), cuda.local.array((N, D), float64),
+            cuda.local.array((N, D), float64),
             cuda.local.array(elastic_size or 1, float64)[:elastic_size],
             cuda.local.array(finger_size or 1, float64)[:finger_size],
             cuda.local.array((F, n, band), float64),

@@ -272,6 +272,8 @@ class NewtonWork(NamedTuple):
     own arrays on the GPU (:mod:`.gpu`). Nothing in it carries from one solve to the next."""
 
     force: np.ndarray
+    strained: np.ndarray
+    """Where the elastic force is evaluated with material damping (:func:`~..kernels.assembly.assemble_rod`)."""
     velocity: np.ndarray
     acceleration: np.ndarray
     elastic: np.ndarray
@@ -315,7 +317,8 @@ def new_work(q, dim, n_fingers, coupled, contact, fingers):
     # per-rod flags and ratios as rows of two arrays: rod_ratio, last_ratio; active, touching, factored, rubbing
     ratios, flags = np.empty((2, n_fingers)), np.zeros((4, n_fingers), dtype=np.bool_)
     motion = np.empty((2, n_nodes, dim))  # velocity and acceleration
-    rods = (np.empty((n_nodes, stride)), motion[0], motion[1], elastic_scratch(n_nodes if stride == 4 else 0),
+    coordinates = np.empty((2, n_nodes, stride))  # force and strained
+    rods = (coordinates[0], coordinates[1], motion[0], motion[1], elastic_scratch(n_nodes if stride == 4 else 0),
             finger_scratch(n_fingers if fingers else 0, n_nodes), np.empty((n_fingers, n, band_width + 1)))
     surface = (np.zeros((n_fingers, n_nodes, dim)), np.empty((dim, dim))) if contact else (tensor, matrix)
     surface = surface + (flags[3], ratios[1])
@@ -338,7 +341,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
     active, touching, rod_ratio, factored = work.active, work.touching, work.rod_ratio, work.factored
     converged, iterations_of, ratio = result.converged, result.iterations, result.ratio
     residual, mass_term, bands, x0 = result.residual, solver.mass_term, work.bands, work.x0
-    scratch = (work.force, work.velocity, work.acceleration, work.elastic, work.fingers)
+    scratch = (work.force, work.strained, work.velocity, work.acceleration, work.elastic, work.fingers)
     rubbing, last_ratio = work.rubbing, work.last_ratio
     measured = free if holds is None else holds.measured
     n_fingers = solver.n_fingers
@@ -659,8 +662,8 @@ def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_si
     ``largest`` updated with it (NaN is caught: it never compares as small)."""
     # the caller passes rows and work arrays it took out of their bundles once per solve: this runs once per rod and
     # Newton iteration, and each bundle member or array view read here would cost an atomic reference count
-    force, velocity, acceleration, elastic, fingers = scratch
-    assemble_rod(r, q, step, rods, terms, matrix, force, band, velocity, acceleration, elastic, fingers)
+    force, strained, velocity, acceleration, elastic, fingers = scratch
+    assemble_rod(r, q, step, rods, terms, matrix, force, band, strained, velocity, acceleration, elastic, fingers)
     own = 0.0
     mass_term, tolerance_inverse, q_pred = solver.mass_term, solver.tolerance_inverse, step.q_pred
     n_nodes, stride = force.shape

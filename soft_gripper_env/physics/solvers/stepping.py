@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ..kernels.assembly import FINGERS_FIELD
 from ..kernels.contact import contact_reactions
 from ..kernels.forces import project_water
 from ..kernels.rod_3d import rod3d_update_frames
@@ -217,7 +218,7 @@ def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, st
 @njit(cache=True, nogil=True, error_model="numpy")
 def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body, interval):
     """:func:`step_batch` with its scratch made here: the CPU's entry point."""
-    work = step_work(state, solver[5], geometry[0].shape[1], rods[5][0] > 0.0, body is not None)
+    work = step_work(state, solver[5], geometry[0].shape[1], rods[FINGERS_FIELD][0] > 0.0, body is not None)
     return step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body,
                       interval, work)
 
