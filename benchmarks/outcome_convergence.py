@@ -400,6 +400,39 @@ def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[st
     return summary
 
 
+def planar_against_3d(joined: dict[tuple, dict], controllers: list[str], dts: dict[str, tuple[float, ...]],
+                      variant: str = "base", floor: bool = True) -> dict:
+    """Whether the planar model stands in for 3-D: each planar Δt's outcomes against the 3-D model's at its finest
+    Δt on the same seeds, by the same tests (:func:`converged`) and against 3-D's chaos floor; prints its table.
+    Empty unless both models ran."""
+    perturbed = with_change(variant, "perturbed")
+    compared = {}
+    for controller in controllers:
+        finest = [dt for dt in sorted(dts.get("3d", ())) if ("3d", controller, dt, variant, "cpu") in joined
+                  and (not floor or ("3d", controller, dt, perturbed, "cpu") in joined)]
+        planar = [dt for dt in sorted(dts.get("planar", ())) if ("planar", controller, dt, variant, "cpu") in joined]
+        if not finest or not planar:
+            continue
+        reference = joined[("3d", controller, finest[0], variant, "cpu")]
+        chaos = agreement(reference, joined[("3d", controller, finest[0], perturbed, "cpu")])[
+            "label_agreement"] if floor else None
+        print(f"\n| planar Δt [ms] ({controller}) | success | 3-D at {1e3 * finest[0]:g} ms | labels agree | "
+              "median gap [mm] | success p | endings p | peak-force KS p | final-distance KS p | a stand-in |\n"
+              "|---|---|---|---|---|---|---|---|---|---|")
+        rows = {}
+        for dt in planar:
+            run = joined[("planar", controller, dt, variant, "cpu")]
+            test = converged(run, reference, chaos)
+            rows[f"{dt:g}"] = {**describe(run), "against_3d": test}
+            print(f"| {1e3 * dt:g} | {success_text(describe(run))} | {success_text(describe(reference))} | "
+                  f"{test['label_agreement']:.3f} | {1e3 * test['median_position_gap_m']:.2f} | "
+                  f"{test['success_p']:.2f} | {test['endings_p']:.2f} | {test['peak_force_ks_p']:.2f} | "
+                  f"{test['final_distance_ks_p']:.2f} | "
+                  f"{ {True: 'yes', False: 'no', None: '— (no floor)'}[test['passes']]} |")
+        compared[controller] = {"reference_3d_dt_s": finest[0], "dts": rows}
+    return compared
+
+
 def gap_order(rows: dict) -> float | None:
     """The order p of the median gap to the finest Δt, gap ∝ Δt^p, fitted on a log–log scale over the Δt compared
     with the finest (None with fewer than two, or a gap of zero)."""
@@ -572,6 +605,8 @@ def main(argv: list[str] | None = None) -> dict:
     results = run_study(pieces, args.runs, args.workers, 60 * args.stop_after)
     summary = summarize(conditions(results, pieces), models, controllers, dts, args.episodes, args.seed, variant,
                         not args.no_floor)
+    summary["planar_against_3d"] = planar_against_3d(conditions(results, pieces), controllers, dts, variant,
+                                                     not args.no_floor)
     summary["complete"] = len(results) == len(pieces)
     if args.time:
         summary["timing"] = time_dts(models, dts, args.seed)

@@ -224,3 +224,26 @@ def test_step_traces_refuse_what_they_cannot_compare(capsys):
         with pytest.raises(SystemExit):
             step_traces.main(options)
         assert message in capsys.readouterr().err
+
+
+def test_the_planar_model_is_compared_with_3d_at_its_finest_step(capsys):
+    """Each planar Δt against 3-D's finest Δt, with 3-D's chaos floor: a planar run equal to 3-D's finest is a
+    stand-in, one with a third of its labels flipped is not, and without 3-D there is no comparison."""
+    rng = np.random.default_rng(1)
+    labels = rng.random(400) < 0.8
+    finest, coarse = run_of(labels), run_of(np.roll(labels, 1))
+    flipped = labels.copy()
+    flipped[:130] = ~flipped[:130]
+    joined = {("3d", "reactive", 0.001, "base", "cpu"): finest, ("3d", "reactive", 0.001, "perturbed", "cpu"): finest,
+              ("3d", "reactive", 0.002, "base", "cpu"): coarse, ("3d", "reactive", 0.002, "perturbed", "cpu"): coarse,
+              ("planar", "reactive", 0.002, "base", "cpu"): finest,
+              ("planar", "reactive", 0.004, "base", "cpu"): run_of(flipped, peaks=finest["peak_forces_N"],
+                                                                   offsets=finest["final_offsets_m"])}
+    dts = {"3d": (0.002, 0.001), "planar": (0.004, 0.002)}
+    compared = study.planar_against_3d(joined, ["reactive"], dts)["reactive"]
+    assert compared["reference_3d_dt_s"] == 0.001
+    assert compared["dts"]["0.002"]["against_3d"]["passes"]
+    assert compared["dts"]["0.004"]["against_3d"]["label_agreement"] == pytest.approx(270 / 400)
+    assert not compared["dts"]["0.004"]["against_3d"]["passes"]
+    assert "| 4 | " in capsys.readouterr().out
+    assert study.planar_against_3d({k: v for k, v in joined.items() if k[0] == "planar"}, ["reactive"], dts) == {}
