@@ -361,8 +361,7 @@ def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[st
     for model in models:
         summary["models"][model] = {}
         for controller in controllers:
-            there = [dt for dt in sorted(dts[model]) if (model, controller, dt, variant, "cpu") in joined
-                     and (not floor or (model, controller, dt, perturbed, "cpu") in joined)]
+            there = complete_dts(joined, model, controller, dts, variant, floor)
             if not there:
                 continue
             reference_dt = there[0]
@@ -380,11 +379,7 @@ def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[st
                 print(f"| {model} | {controller} | {1e3 * dt:g} | {success_text(row)} | "
                       + ("reference |" if test is None else f"{test['label_agreement']:.3f} |")
                       + (f" {twin['label_agreement']:.3f} | " if floor else " — | ")
-                      + ("— | — | — | — | — | — |" if test is None else
-                         f"{1e3 * test['median_position_gap_m']:.2f} | {test['success_p']:.2f} | "
-                         f"{test['endings_p']:.2f} | {test['peak_force_ks_p']:.2f} | "
-                         f"{test['final_distance_ks_p']:.2f} | "
-                         f"{ {True: 'yes', False: 'no', None: '— (no floor)'}[test['passes']]} |"))
+                      + ("— | — | — | — | — | — |" if test is None else test_cells(test)))
             finest = min(dts[model])
             if reference_dt != finest:
                 print(f"  ({model}, {controller}: Δt = {1e3 * finest:g} ms is not there yet; "
@@ -400,6 +395,22 @@ def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[st
     return summary
 
 
+def complete_dts(joined: dict[tuple, dict], model: str, controller: str, dts: dict[str, tuple[float, ...]],
+                 variant: str, floor: bool) -> list[float]:
+    """The Δt of ``model`` and ``controller`` whose condition is complete in ``joined`` (with its perturbed twin,
+    with ``floor``), finest first."""
+    perturbed = with_change(variant, "perturbed")
+    return [dt for dt in sorted(dts.get(model, ())) if (model, controller, dt, variant, "cpu") in joined
+            and (not floor or (model, controller, dt, perturbed, "cpu") in joined)]
+
+
+def test_cells(test: dict) -> str:
+    """A comparison's columns (:func:`converged`) from the median gap to the verdict, as the tables print them."""
+    verdict = {True: "yes", False: "no", None: "— (no floor)"}[test["passes"]]
+    return (f"{1e3 * test['median_position_gap_m']:.2f} | {test['success_p']:.2f} | {test['endings_p']:.2f} | "
+            f"{test['peak_force_ks_p']:.2f} | {test['final_distance_ks_p']:.2f} | {verdict} |")
+
+
 def planar_against_3d(joined: dict[tuple, dict], controllers: list[str], dts: dict[str, tuple[float, ...]],
                       variant: str = "base", floor: bool = True) -> dict:
     """Whether the planar model stands in for 3-D: each planar Δt's outcomes against the 3-D model's at its finest
@@ -408,14 +419,14 @@ def planar_against_3d(joined: dict[tuple, dict], controllers: list[str], dts: di
     perturbed = with_change(variant, "perturbed")
     compared = {}
     for controller in controllers:
-        finest = [dt for dt in sorted(dts.get("3d", ())) if ("3d", controller, dt, variant, "cpu") in joined
-                  and (not floor or ("3d", controller, dt, perturbed, "cpu") in joined)]
-        planar = [dt for dt in sorted(dts.get("planar", ())) if ("planar", controller, dt, variant, "cpu") in joined]
+        finest = complete_dts(joined, "3d", controller, dts, variant, floor)
+        planar = complete_dts(joined, "planar", controller, dts, variant, False)
         if not finest or not planar:
             continue
         reference = joined[("3d", controller, finest[0], variant, "cpu")]
         chaos = agreement(reference, joined[("3d", controller, finest[0], perturbed, "cpu")])[
             "label_agreement"] if floor else None
+        reference_text = success_text(describe(reference))
         print(f"\n| planar Δt [ms] ({controller}) | success | 3-D at {1e3 * finest[0]:g} ms | labels agree | "
               "median gap [mm] | success p | endings p | peak-force KS p | final-distance KS p | a stand-in |\n"
               "|---|---|---|---|---|---|---|---|---|---|")
@@ -424,11 +435,8 @@ def planar_against_3d(joined: dict[tuple, dict], controllers: list[str], dts: di
             run = joined[("planar", controller, dt, variant, "cpu")]
             test = converged(run, reference, chaos)
             rows[f"{dt:g}"] = {**describe(run), "against_3d": test}
-            print(f"| {1e3 * dt:g} | {success_text(describe(run))} | {success_text(describe(reference))} | "
-                  f"{test['label_agreement']:.3f} | {1e3 * test['median_position_gap_m']:.2f} | "
-                  f"{test['success_p']:.2f} | {test['endings_p']:.2f} | {test['peak_force_ks_p']:.2f} | "
-                  f"{test['final_distance_ks_p']:.2f} | "
-                  f"{ {True: 'yes', False: 'no', None: '— (no floor)'}[test['passes']]} |")
+            print(f"| {1e3 * dt:g} | {success_text(rows[f'{dt:g}'])} | {reference_text} | "
+                  f"{test['label_agreement']:.3f} | {test_cells(test)}")
         compared[controller] = {"reference_3d_dt_s": finest[0], "dts": rows}
     return compared
 
@@ -603,10 +611,9 @@ def main(argv: list[str] | None = None) -> dict:
     variant = ", ".join(args.change) or "base"
     pieces = plan(models, controllers, dts, args.episodes, args.seed, variant, not args.no_floor)
     results = run_study(pieces, args.runs, args.workers, 60 * args.stop_after)
-    summary = summarize(conditions(results, pieces), models, controllers, dts, args.episodes, args.seed, variant,
-                        not args.no_floor)
-    summary["planar_against_3d"] = planar_against_3d(conditions(results, pieces), controllers, dts, variant,
-                                                     not args.no_floor)
+    joined = conditions(results, pieces)
+    summary = summarize(joined, models, controllers, dts, args.episodes, args.seed, variant, not args.no_floor)
+    summary["planar_against_3d"] = planar_against_3d(joined, controllers, dts, variant, not args.no_floor)
     summary["complete"] = len(results) == len(pieces)
     if args.time:
         summary["timing"] = time_dts(models, dts, args.seed)
