@@ -401,3 +401,24 @@ def test_env_speed_ceiling_is_substeps_times_the_fingers_alone_and_gives_each_go
                                                       "ceiling[3d][fingers_alone_us_per_gripper_step]"}
     with pytest.raises(ValueError, match="planar: µs per gripper-step 0.0"):
         ceilings(1000.0, {"planar": 0.0}, {"planar": 10})
+
+
+def test_first_step_refuses_an_unknown_model_rounds_or_base(capsys):
+    from benchmarks import first_step
+
+    for argv, named in ((["--models", "4d"], "--models"), (["--rounds", "0"], "--rounds"),
+                        (["--base", "no-such-commit"], "--base")):
+        with pytest.raises(SystemExit):
+            first_step.main(argv)
+        assert named in capsys.readouterr().err
+
+
+def test_first_step_adds_a_processes_phases_and_plots_its_bars(tmp_path):
+    from benchmarks.first_step import plot, total
+
+    phases = {"import": {"wall_s": 1.0, "cpu_s": 0.5}, "make_and_reset": {"wall_s": 2.0, "cpu_s": 1.5},
+              "first_step": {"wall_s": 40.0, "cpu_s": 30.0}}
+    assert total(phases, "cpu_s") == 32.0 and total(phases, "wall_s") == 43.0
+    results = {"trees": {"this": {"3d": {"empty_cache": phases, "warm_cache": phases}}}}
+    plot(results, ["3d"], tmp_path / "first_step.png")
+    assert (tmp_path / "first_step.png").stat().st_size > 0

@@ -38,6 +38,7 @@ from ..kernels.body import BodyArrays, BodyMotion, BodyState, body_in_rod_frames
 from ..kernels.contact import ObjectView, find_penetrations, outward_normal, within_reach
 from ..kernels.finger_contact import find_near_fingers
 from ..kernels.local import local_array
+from ..kernels.typed_none import none_or
 from ..scene.forces import ForceTerms
 from .newton import BodyCoupling, Holds, NewtonWork, SolverArrays, SolveResult, new_work, newton
 
@@ -147,7 +148,7 @@ def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, f
     correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result, work)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result, work):
     """The predictor–corrector for every gripper of a batch (see the module notes), with the scratch ``work``
     (:class:`CorrectorWork`).
@@ -164,13 +165,33 @@ def correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, fre
     step, rods, terms, solver = StepInputs(*step), named_rods(rods), ForceTerms(*terms), SolverArrays(*solver)
     find_near_fingers(step.q_old, step.q_pred, rods.fingers, step.near, work.newton.fingers)
     holds, geometry, result = Holds(*holds), ContactGeometry(*geometry), SolveResult(*result)
-    if free_body is None:
-        _correct(q, step, rods, terms, solver, holds, hold_at, geometry, None, result, work)
-    else:
-        body, motion = free_body
-        moving = (BodyArrays(*body), BodyMotion(motion[0], motion[1], motion[2], BodyState(*motion[3]), motion[4],
-                                                    motion[5]))
-        _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result, work)
+    _correct(q, step, rods, terms, solver, holds, hold_at, geometry, named_free_body(free_body), result, work)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _named_free_body(free_body):
+    """The bodies' arrays and their unknowns as plain tuples, named (:class:`~..kernels.body.BodyArrays`,
+    :class:`~..kernels.body.BodyMotion`)."""
+    body, motion = free_body
+    return (BodyArrays(*body), BodyMotion(motion[0], motion[1], motion[2], BodyState(*motion[3]), motion[4],
+                                          motion[5]))
+
+
+named_free_body = none_or(_named_free_body)
+""":func:`_named_free_body`, or None for a fixed object (chosen as the kernel compiles:
+:mod:`~..kernels.typed_none`)."""
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _body_coupling(moving, geometry, held, dim, basis_work):
+    """What couples the rods to the ``moving`` bodies in Newton's method (:class:`~.newton.BodyCoupling`): in 3-D
+    every motion of a body, planar the motions in the plane that its held nodes leave it."""
+    basis = geometry.any_motion if dim == 3 else planar_body_basis(held, geometry.plane_normals, basis_work)
+    return BodyCoupling(moving[0], moving[1], basis)
+
+
+body_coupling = none_or(_body_coupling)
+""":func:`_body_coupling`, or None for a fixed object (chosen as the kernel compiles)."""
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -197,14 +218,12 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
     result.residual[:, :] = 0.0
     for k in range(solver.max_corrector_iterations + n_nodes + 1):  # holds-only solves end by N
         contact_masks(solver.clamp_free, held, sliding, dim, free, holds.measured)
-        if moving is not None:
-            basis = geometry.any_motion if dim == 3 else planar_body_basis(held, geometry.plane_normals, work.basis)
-            newton(q, step, rods, terms, solver, free, holds, BodyCoupling(moving[0], moving[1], basis), solve,
-                   result, work.newton)
-            _body_at_solution(step, solver, holds, geometry, moving[0], moving[1], rotation, shift)
-        else:  # a fixed object's stuck nodes stay where they were held; solved from the last solution, warm
+        if moving is None:  # a fixed object's stuck nodes stay where they were held; solved from the last solution
             _hold_in_place(positions, held, sliding, hold_at, solve)
-            newton(q, step, rods, terms, solver, free, holds, None, solve, result, work.newton)
+        newton(q, step, rods, terms, solver, free, holds, body_coupling(moving, geometry, held, dim, work.basis), solve,
+               result, work.newton)
+        if moving is not None:
+            _body_at_solution(step, solver, holds, geometry, moving[0], moving[1], rotation, shift)
         view = ObjectView(starts, ends, radii, within_reach(starts, ends, radii, solver.finger_length, work.reach),
                           shift)
         within_budget = k < solver.max_corrector_iterations

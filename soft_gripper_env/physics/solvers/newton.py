@@ -424,9 +424,10 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
             return
         for f in range(n_fingers):
             if active[f]:
-                if not matrices:
+                if not matrices:  # the flag as a variable that is True here: a literal True is a type of its own,
+                    # for which Numba would compile the rod's energies and contact a second time
                     _rod_equations(first + f, q, step, rods, terms, solver, measured, holds, residual[first + f],
-                                   x0[f], 0.0, bands[f], scratch, work.normals[f], work.basis, True)
+                                   x0[f], 0.0, bands[f], scratch, work.normals[f], work.basis, not matrices)
                 band = work.bands[f]
                 diagonal = band.shape[1] - 1
                 for j in range(band.shape[0]):

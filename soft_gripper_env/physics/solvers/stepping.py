@@ -27,6 +27,7 @@ from ..kernels.assembly import FINGERS_FIELD
 from ..kernels.contact import contact_reactions
 from ..kernels.forces import project_water
 from ..kernels.rod_3d import rod3d_update_frames
+from ..kernels.typed_none import none_or
 from .corrector import CorrectorWork, correct_contacts, corrector_work
 from .newton import finish, predict
 
@@ -223,7 +224,7 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
                       interval, work)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body, interval,
                work):
     """Steps ``first`` … ``n_steps`` − 1 of length ``dt`` [s] of every running gripper, from and into ``state``
@@ -240,7 +241,6 @@ def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
     n_grippers = n_rods // n_fingers
     dim = geometry[0].shape[1]
     planar = state.tangent.shape[0] == 0
-    free_body = body is not None
     q_pred, new, water, water_acceleration, near = work.q_pred, work.new, work.water, work.water_acceleration, \
         work.near
     sliding, friction, measured, hold_at = work.sliding, work.friction, work.measured, work.hold_at
@@ -260,7 +260,7 @@ def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
                 for d in range(dim):
                     friction[r, i, d] = 0.0
                     hold_at[r, i, d] = state.q[r, i, d]
-                if free_body:
+                if body is not None:
                     for d in range(3):
                         new.hold_offset[r, i, d] = state.hold_offset[r, i, d]
         changed[:] = False
@@ -269,22 +269,19 @@ def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
         result = (converged, iterations, ratio, residual, corrector, changed)
         holds = (new.held, new.hold_offset, projection, sliding, friction, measured, geometry[0], geometry[1],
                  geometry[2], geometry[3])
-        if free_body:
+        if body is not None:
             for b in range(n_grippers):
                 for d in range(3):
                     new.body_position[b, d] = state.body_position[b, d] + dt * state.body_velocity[b, d]
                     new.body_angular_velocity[b, d] = dt * state.body_angular_velocity[b, d]  # θ, the rotation
                     water_acceleration[b, d] = (gripper_water[k + 1, b, d] - gripper_water[k, b, d]) / dt
-            old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
-            motion = (new.body_position, new.body_angular_velocity, new.body_orientation, old, gripper_water[k],
-                      water_acceleration)
-            correct_contacts(new.q, step, rods, terms, solver, holds, hold_at, geometry, (body, motion), result,
-                             work.corrector_work)
-        else:
-            correct_contacts(new.q, step, rods, terms, solver, holds, hold_at, geometry, None, result,
-                             work.corrector_work)
+        old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
+        motion = (new.body_position, new.body_angular_velocity, new.body_orientation, old, gripper_water[k],
+                  water_acceleration)  # (empty arrays for a fixed object, and not used)
+        correct_contacts(new.q, step, rods, terms, solver, holds, hold_at, geometry, with_motion(body, motion), result,
+                         work.corrector_work)
         finish(new.q, state.q, state.velocity, dt, new.velocity, new.acceleration)
-        if free_body:
+        if body is not None:
             for b in range(n_grippers):
                 for d in range(3):
                     new.body_velocity[b, d] = (new.body_position[b, d] - state.body_position[b, d]) / dt
@@ -303,7 +300,7 @@ def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
                 for i in range(n_nodes):
                     for s in range(stride):
                         finite = finite and math.isfinite(new.q[r, i, s]) and math.isfinite(new.velocity[r, i, s])
-            if free_body:
+            if body is not None:
                 for d in range(3):
                     finite = finite and math.isfinite(new.body_position[b, d]) \
                         and math.isfinite(new.body_velocity[b, d])
@@ -317,6 +314,16 @@ def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
         if any_pending:  # the others took the step; the pending ones keep their state for the adaptive path
             return k
     return n_steps
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _with_motion(body, motion):
+    return body, motion
+
+
+with_motion = none_or(_with_motion)
+"""The corrector's ``free_body``: the bodies' arrays and their motion, or None for a fixed object (chosen as the kernel
+compiles: :mod:`~..kernels.typed_none`)."""
 
 
 __all__ = ["WorkingState", "Interval", "StepWork", "step_work", "commit_step", "take_steps", "step_batch"]

@@ -1,0 +1,189 @@
+"""How long a new user waits for the first env step: the kernels compiled from an empty Numba cache, then loaded
+from the cache by a later run, for this tree and (the anchor, timed in the same run) an older commit.
+
+    python -m benchmarks.first_step [--base COMMIT] [--models 3d,planar] [--rounds 1] [--demo]
+        [--json out/first_step.json] [--plot out/first_step.png]
+
+Each measurement is a process of its own whose Numba cache is a fresh, empty folder (``NUMBA_CACHE_DIR``): it
+imports the package, makes the env (``gym.make("SoftGripperUnderwater-v0", model=...)``), resets it and takes one
+step, and reports the wall and CPU time of each phase; a second process then does the same from the cache the first
+one filled. The trees alternate within a round, and across rounds the least time counts. ``--demo`` also times the
+README's demo (the paper's figures and the env's video) from an empty cache, this tree only. Compilation is
+single-threaded, so the CPU time is the figure least disturbed by other load on the machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks.compare_commits import ISOLATE, resolve, worktree
+
+ROOT = Path(__file__).resolve().parents[1]
+MODELS = ("3d", "planar")
+GOAL_S = 30.0
+"""What a first step from an empty cache should take at most on a 2-core machine [s] (the plot's dotted line)."""
+
+_CHILD = ISOLATE + """
+import json
+import time
+wall, cpu = time.perf_counter(), time.process_time()
+def phase():
+    global wall, cpu
+    now_wall, now_cpu = time.perf_counter(), time.process_time()
+    spent = {'wall_s': now_wall - wall, 'cpu_s': now_cpu - cpu}
+    wall, cpu = now_wall, now_cpu
+    return spent
+sys.path[:0] = [tree]
+import numpy as np
+import gymnasium as gym
+import soft_gripper_env  # noqa: F401
+phases = {'import': phase()}
+env = gym.make('SoftGripperUnderwater-v0', model=sys.argv[2])
+env.reset(seed=0)
+phases['make_and_reset'] = phase()
+env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+phases['first_step'] = phase()
+print(json.dumps(phases))
+"""
+
+
+def time_first_step(tree: Path, model: str, cache: Path) -> dict[str, dict[str, float]]:
+    """The phases of a first env step of ``model`` in a fresh process of ``tree`` with the Numba cache ``cache``:
+    {phase: {"wall_s", "cpu_s"}}."""
+    environment = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    done = subprocess.run([sys.executable, "-c", _CHILD, str(tree), model], cwd=tree, env=environment,
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"the first step of model {model!r} failed in {tree}:\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def total(phases: dict[str, dict[str, float]], clock: str) -> float:
+    """The time from the process's start to the end of its first step [s] by ``clock`` ("wall_s" or "cpu_s")."""
+    return sum(spent[clock] for spent in phases.values())
+
+
+def time_demo() -> dict[str, float]:
+    """The README's demo of this tree (its two Python commands, without the set-up) from an empty cache [s]."""
+    with tempfile.TemporaryDirectory() as tmp:
+        environment = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "cache"))
+        start_wall, start_cpu = time.perf_counter(), _children_cpu()
+        for module, folder in (("examples.reproduce_paper", "paper"), ("examples.record_ramp_video", "video")):
+            subprocess.run([sys.executable, "-m", module, "--out", str(Path(tmp) / folder)], cwd=ROOT,
+                           env=environment, check=True, capture_output=True)
+        return {"wall_s": time.perf_counter() - start_wall, "cpu_s": _children_cpu() - start_cpu}
+
+
+def _children_cpu() -> float:
+    usage = os.times()
+    return usage.children_user + usage.children_system
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--base", help="an older commit, timed the same way in the same run (the anchor)")
+    parser.add_argument("--models", default=",".join(MODELS), help="comma-separated, of 3d, planar (default both)")
+    parser.add_argument("--rounds", type=int, default=1, help="rounds of every measurement; the least time counts")
+    parser.add_argument("--demo", action="store_true", help="also time the README's demo from an empty cache")
+    parser.add_argument("--json", type=Path, default=Path("out") / "first_step.json")
+    parser.add_argument("--plot", type=Path, default=Path("out") / "first_step.png")
+    args = parser.parse_args(argv)
+    models = [model.strip() for model in args.models.split(",") if model.strip()]
+    for model in models:
+        if model not in MODELS:
+            parser.error(f"--models: {model!r} is not one of {', '.join(MODELS)}")
+    if args.rounds < 1:
+        parser.error(f"--rounds = {args.rounds} must be at least 1")
+    base = None
+    if args.base is not None:
+        base = resolve(args.base)
+        if base is None:
+            parser.error(f"--base {args.base!r} names no commit of this repository")
+
+    results: dict = {"base": base, "rounds": args.rounds, "trees": {}}
+    with tempfile.TemporaryDirectory() as tmp, (worktree(base) if base else _no_tree()) as base_tree:
+        trees = {"this": ROOT} | ({"base": base_tree} if base else {})
+        for name in trees:
+            results["trees"][name] = {model: {"empty_cache": None, "warm_cache": None} for model in models}
+        steps = [(round_, model, name) for round_ in range(args.rounds) for model in models for name in trees]
+        for count, (round_, model, name) in enumerate(steps, start=1):
+            print(f"[{count}/{len(steps)}] round {round_ + 1}, {model}, {name} tree: compiling from an empty cache …",
+                  file=sys.stderr, flush=True)
+            cache = Path(tmp) / f"cache-{name}-{model}-{round_}"
+            measured = {"empty_cache": time_first_step(trees[name], model, cache),
+                        "warm_cache": time_first_step(trees[name], model, cache)}
+            kept = results["trees"][name][model]
+            for kind, phases in measured.items():
+                if kept[kind] is None or total(phases, "cpu_s") < total(kept[kind], "cpu_s"):
+                    kept[kind] = phases
+    if args.demo:
+        print("the demo from an empty cache …", file=sys.stderr, flush=True)
+        results["demo_empty_cache"] = time_demo()
+
+    print("\n| model | tree | first step, empty cache: wall [s] | CPU [s] | first step, warm cache: wall [s] |")
+    print("|---|---|---|---|---|")
+    for model in models:
+        for name, tree_results in results["trees"].items():
+            empty, warm = tree_results[model]["empty_cache"], tree_results[model]["warm_cache"]
+            print(f"| {model} | {name} | {total(empty, 'wall_s'):.1f} | {total(empty, 'cpu_s'):.1f} | "
+                  f"{total(warm, 'wall_s'):.1f} |")
+        if base:
+            ratio = total(results["trees"]["base"][model]["empty_cache"], "cpu_s") / \
+                total(results["trees"]["this"][model]["empty_cache"], "cpu_s")
+            results.setdefault("speedup_empty_cache_cpu", {})[model] = ratio
+            print(f"| {model} | base over this (CPU) | {ratio:.2f}× | | |")
+    if args.demo:
+        print(f"\nthe demo from an empty cache: {results['demo_empty_cache']['wall_s']:.0f} s wall, "
+              f"{results['demo_empty_cache']['cpu_s']:.0f} s CPU")
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(results, indent=1))
+    plot(results, models, args.plot)
+    print(f"\n{args.json}, {args.plot}")
+    return results
+
+
+class _no_tree:
+    def __enter__(self):
+        return None
+
+    def __exit__(self, *exc):
+        return False
+
+
+def plot(results: dict, models: list[str], path: Path) -> None:
+    """Bars of the first step's CPU time from an empty cache, by phase, per model and tree."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    trees = list(results["trees"])
+    fig, ax = plt.subplots(figsize=(7.5, 3.2))
+    labels, bottoms = [], None
+    for phase, color in (("import", "#999999"), ("make_and_reset", "#4c72b0"), ("first_step", "#dd8452")):
+        values = [results["trees"][tree][model]["empty_cache"][phase]["cpu_s"] for model in models for tree in trees]
+        bottoms = [0.0] * len(values) if bottoms is None else bottoms
+        ax.barh(range(len(values)), values, left=bottoms, color=color, label=phase.replace("_", " "))
+        bottoms = [b + v for b, v in zip(bottoms, values, strict=True)]
+    labels = [f"{model}, {tree}" for model in models for tree in trees]
+    ax.set_yticks(range(len(labels)), labels)
+    ax.invert_yaxis()
+    ax.axvline(GOAL_S, color="k", linestyle=":", linewidth=1)
+    ax.text(GOAL_S, -0.6, f" goal {GOAL_S:g} s", fontsize=8, va="bottom")
+    ax.set_xlabel("CPU time from an empty Numba cache to the first env step [s]")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
