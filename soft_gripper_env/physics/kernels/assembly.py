@@ -66,8 +66,8 @@ class RodArrays(NamedTuple):
                    np.empty((0, 0)))
 
 
-N_DESIGN_FIELDS = 7
-"""The fields of :class:`RodArrays` that a design fixes, which come before a state's frames."""
+N_DESIGN_FIELDS = RodArrays._fields.index("tangent")
+"""How many fields of :class:`RodArrays` a design fixes: those before a state's frames."""
 FINGERS_FIELD = RodArrays._fields.index("fingers")
 """Where the finger contact's constants are among the fields of :class:`RodArrays` (for its plain tuple)."""
 
