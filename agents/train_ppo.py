@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import asdict, replace
@@ -36,6 +37,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
+import soft_gripper_env
 from agents.evaluate import add_reflexes, evaluate, load_ppo, ppo_policy, reflex_settings, task_from_arguments
 from agents.learning_curves import load_run, plot_learning_curves
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
@@ -168,6 +170,22 @@ class ProgressAndCurve(BaseCallback):
         self.bar.close()
 
 
+def provenance() -> dict:
+    """Where a run was trained: the package's version and the git commit of the checkout it runs from (with
+    ``-dirty`` where tracked files differ from it; None outside a git checkout), for its config.json."""
+    root = Path(soft_gripper_env.__file__).resolve().parents[1]
+    commit = None
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=30)
+        if head.returncode == 0:
+            changed = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                                     capture_output=True, text=True, timeout=30)
+            commit = head.stdout.strip() + ("-dirty" if changed.stdout.strip() else "")
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return {"package_version": soft_gripper_env.__version__, "git_commit": commit}
+
+
 def save_run(folder: Path, model: PPO, env: VecNormalize, config: dict) -> None:
     """What ``agents.evaluate --policy FOLDER`` loads: the model (ppo_model.zip), its VecNormalize statistics
     (vecnormalize.pkl) and the run's configuration (config.json)."""
@@ -257,8 +275,10 @@ def main(argv: list[str] | None = None) -> dict:
                                 num_threads=args.num_threads, **settings)
     ramp = PressureWarningRamp(task.reward, args.final_pressure_weight, *args.pressure_ramp)
 
+    trained_from = provenance()
+
     def config() -> dict:
-        return {"timesteps": args.timesteps, "seed": args.seed, "num_envs": args.num_envs,
+        return {**trained_from, "timesteps": args.timesteps, "seed": args.seed, "num_envs": args.num_envs,
                 "num_threads": args.num_threads,
                 # PyTorch's thread count changes the last bits of every update (its sums run in another order),
                 # and a run then parts from one made with another count: a run reproduces only with the same one.

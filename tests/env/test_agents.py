@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -111,6 +112,10 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     assert results["ppo"] == saved["ppo"]
     config = json.loads((tmp_path / "config.json").read_text())
     assert config["timesteps"] == 256 and config["task"]["model"] == "planar"
+    import soft_gripper_env
+
+    assert config["package_version"] == soft_gripper_env.__version__
+    assert config["git_commit"] is None or re.fullmatch(r"[0-9a-f]{40}(-dirty)?", config["git_commit"])
     assert config["torch_threads"] == torch.get_num_threads()  # needed to reproduce the run bit for bit
     assert config["pressure_ramp"] == {"initial": 1.0, "final": train_ppo.FINAL_PRESSURE_WEIGHT,
                                        "start_steps": 200_000, "end_steps": 400_000}
