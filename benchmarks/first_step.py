@@ -15,6 +15,7 @@ single-threaded, so the CPU time is the figure least disturbed by other load on 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -108,7 +109,7 @@ def main(argv: list[str] | None = None) -> dict:
             parser.error(f"--base {args.base!r} names no commit of this repository")
 
     results: dict = {"base": base, "rounds": args.rounds, "trees": {}}
-    with tempfile.TemporaryDirectory() as tmp, (worktree(base) if base else _no_tree()) as base_tree:
+    with tempfile.TemporaryDirectory() as tmp, (worktree(base) if base else contextlib.nullcontext()) as base_tree:
         trees = {"this": ROOT} | ({"base": base_tree} if base else {})
         for name in trees:
             results["trees"][name] = {model: {"empty_cache": None, "warm_cache": None} for model in models}
@@ -147,14 +148,6 @@ def main(argv: list[str] | None = None) -> dict:
     plot(results, models, args.plot)
     print(f"\n{args.json}, {args.plot}")
     return results
-
-
-class _no_tree:
-    def __enter__(self):
-        return None
-
-    def __exit__(self, *exc):
-        return False
 
 
 def plot(results: dict, models: list[str], path: Path) -> None:
