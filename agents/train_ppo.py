@@ -1,13 +1,13 @@
 """Train PPO (Stable-Baselines3's MlpPolicy) on SoftGripperUnderwater-v0 from scratch.
 
     python -m agents.train_ppo --out DIR [--timesteps 600000] [--seed 0] [--num-envs 32] [--num-threads 2]
-        [--model planar] [--observation sensors] [--validate-every 50000] [--eval-episodes 200]
-        [--touching-closing-rate RATE] [--approach-slowing-gap M] [--final-pressure-weight 4]
+        [--model 3d] [--observation sensors] [--validate-every 50000] [--eval-episodes 200]
+        [--touching-closing-rate RATE] [--approach-slowing-gap M] [--final-pressure-weight 12]
         [--pressure-ramp 200000 400000] [--checkpoint-every 100000]
 
-By default PPO trains in the planar rod model on the sensors' observation (``GraspTask.observation``): a planar
-step costs about a third of a 3-D one, so the 30 minutes buy three times the experience, and the sensors'
-readings mean the same in both models, so the policy runs in the 3-D model too (``agents.evaluate --model 3d``).
+By default PPO trains in the env's default rod model (3-D; ``--model planar`` costs about a third per step) on the
+sensors' observation (``GraspTask.observation``), whose readings mean the same in both models, so a policy trained
+in one runs in the other (``agents.evaluate --model``).
 All episodes of one rollout are stepped in one batched simulator (agents/sb3_vec_env.py), on ``--num-threads``
 threads; observations and rewards are normalised by VecNormalize. The reward's pressure warning grows once PPO
 has begun to grasp (``--final-pressure-weight``, ``--pressure-ramp``: ``PressureWarningRamp``). DIR receives,
@@ -42,7 +42,7 @@ from agents.evaluate import add_reflexes, evaluate, load_ppo, ppo_policy, reflex
 from agents.learning_curves import load_run, plot_learning_curves
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
 from agents.scripted import RampPolicy, ReactivePolicy
-from soft_gripper_env.grasp_task import RewardWeights
+from soft_gripper_env.grasp_task import MODELS, GraspTask, RewardWeights
 
 HELD_OUT_SEED = 1_000_000
 """First seed of the held-out evaluation: training episodes are drawn from the generators of seeds seed … seed +
@@ -62,18 +62,18 @@ has begun to grasp, then growing to 12 at 400,000. Against a constant weight 1 (
 settings and seeds, 200 held-out seeds) a ramp to 4 made the policies both gentler and more successful; a weight
 of 3 from the start kept two seeds of three from learning to close; heavier final weights trade success for
 force along one line, and with the closing reflexes 12 is the weight whose three seeds meet the goals
-(docs/environment.md, *PPO*; docs/ppo_experiments.md)."""
+(docs/training.md; docs/notes/ppo_experiments.md)."""
 TRAINING_REFLEXES = {"touching_closing_rate": 0.15, "approach_slowing_gap": 0.01}
 """The closing reflexes the policies train with (``--touching-closing-rate``, ``--approach-slowing-gap``): a
 touching finger closes at most at 0.15 1/s, and within 1 cm of the specimen a finger's fastest closing falls
 linearly from 0.3 1/s to that bound. With them, and the warning grown to 12, PPO holds more gently than the
-reactive controller and more often (docs/environment.md, *PPO*)."""
+reactive controller and more often (docs/training.md)."""
 POLICY_SETTINGS = {"net_arch": [128, 128], "log_std_init": 0.0}
 """MlpPolicy's network and initial action spread (std 1, SB3's default). Narrower starts keep more of a good
 policy's holds (the reactive controller with per-step noise of std 0.2 keeps 50 % of its success, with 0.37 only
 5 %), but the cubic action map turns a narrow start into no motion at all: with std 0.2, PPO's return stayed at
 the passive policy's (about 7) for 200,000 steps, while with std 1 it rose to 75 within 300,000 (seed 0, 3-D;
-docs/ppo_experiments.md)."""
+docs/notes/ppo_experiments.md)."""
 
 
 def ramped(steps: int, start: int, end: int, initial: float, final: float) -> float:
@@ -217,17 +217,18 @@ class RolloutCheckpoints(BaseCallback):
         return True
 
 
-def main(argv: list[str] | None = None) -> dict:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's options and their defaults."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, required=True, help="folder for the model, statistics, config and logs")
     parser.add_argument("--timesteps", type=int, default=600_000,
-                        help="env steps (default 600,000: about 30 minutes in the planar model on 2 cores, alone)")
+                        help="env steps (default 600,000: about an hour in the 3-D model on 2 cores, alone)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--num-envs", type=int, default=32)
     parser.add_argument("--num-threads", type=int, default=2,
                         help="threads stepping the envs (at most --num-envs; 2 uses both cores of a 2-core machine)")
-    parser.add_argument("--model", choices=("planar", "3d"), default="planar",
-                        help="rod model to train in (default planar: a third of the 3-D model's cost per step)")
+    parser.add_argument("--model", choices=MODELS, default=GraspTask().model,
+                        help="rod model to train in (default: the env's, 3d; planar costs a third per step)")
     parser.add_argument("--observation", choices=("full", "sensors"), default="sensors",
                         help="what the policy observes (GraspTask.observation; default sensors: the same in both rod "
                              "models, so the policy also runs in the other)")
@@ -247,6 +248,11 @@ def main(argv: list[str] | None = None) -> dict:
                              "agents.evaluate --policy and equal to a run of --timesteps N; 0: none)")
     parser.add_argument("--validation-episodes", type=int, default=VALIDATION_EPISODES,
                         help=f"episodes per validation (default {VALIDATION_EPISODES})")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = build_parser()
     args = parser.parse_args(argv)
     for name in ("timesteps", "num_envs", "num_threads", "validation_episodes"):
         if getattr(args, name) < 1:

@@ -138,9 +138,7 @@ class GraspTask:
     fastest closing. 0.3 1/s is the slowest approach that still catches the drifting specimen (the reactive
     controller closing at 0.2 1/s loses the specimen on 21 of 96 tuning seeds, at 0.15 1/s on 36, at 0.3 1/s on 2);
     a faster one only lets a policy meet the specimen harder (one control interval past the touch at 0.5 1/s adds
-    Δκ̄ = 0.025, about 5 N at a grip's 0.2 N per 0.001). PPO trained with 0.5 1/s peaked at a mean 4.2 N, with 0.3
-    1/s at 3.6 N and 6 points more success, and at 3.3 N with the pressure warning on the interval's force
-    (docs/environment.md)."""
+    Δκ̄ = 0.025, about 5 N at a grip's 0.2 N per 0.001; docs/environment.md)."""
     action_exponent: float = 3.0
     """An action a in [−1, 1] sets the rate max_curvature_rate·sign(a)·|a|^p, p this exponent (dimensionless,
     ≥ 1): a grip's force follows κ̄ steeply (a κ̄ change of 0.001 presses about 0.2 N harder), so holding a fragile
@@ -152,7 +150,7 @@ class GraspTask:
     (the default): no bound, so the env and its baselines are without it. It is the reactive controller's own rule
     made a reflex of the gripper. ``agents.train_ppo`` trains with 0.15 1/s (and a 1 cm
     :attr:`approach_slowing_gap`): with them PPO holds more gently than the controller and more often
-    (docs/environment.md, *PPO*). A policy trained with a bound must be run with the same one."""
+    (docs/training.md). A policy trained with a bound must be run with the same one."""
     approach_slowing_gap: float | None = None
     """Within this gap [m] of the specimen (:attr:`GraspBatch.finger_gap` at the start of the control interval)
     a finger that does not touch closes at most at a rate falling linearly with its gap, from
@@ -160,7 +158,7 @@ class GraspTask:
     None (the default): no slowing. It is the reactive controller's approach (slowing within 1 cm) made a reflex,
     and the controller acts the same with it. Both reflexes on a policy trained without them trade success for
     force, and PPO trained with them holds tighter unless the reward's pressure warning grows (weight 12 in
-    ``agents.train_ppo``; docs/ppo_experiments.md). A policy trained with it must be run with the same gap."""
+    ``agents.train_ppo``; docs/notes/ppo_experiments.md). A policy trained with it must be run with the same gap."""
     curvature_range: tuple[float, float] = (-0.2, 0.0)
     """Range of κ̄ (dimensionless) the actuators reach: κ̄ saturates there, as a pneumatic finger saturates at its
     maximum pressure (−0.2: each finger's natural shape curls through about 205°) and is straight without

@@ -1,6 +1,6 @@
-"""The refactoring guard (scripts/golden_outputs.py), the commit comparison (benchmarks/compare_commits.py), the
-reference-count benchmark's reading of gdb (benchmarks/refcounts.py), the profile's attribution of samples
-(benchmarks/profile_env.py), the grasp-outcome study's scoring (benchmarks/speed_vs_error.py) and env_speed's
+"""The refactoring guard (tools/golden_outputs.py), the commit comparison (tools/compare_commits.py), the
+reference-count benchmark's reading of gdb (tools/refcounts.py), the profile's attribution of samples
+(tools/profile_env.py), the grasp-outcome study's scoring (benchmarks/speed_vs_error.py) and env_speed's
 ceiling (benchmarks/env_speed.py)."""
 
 import os
@@ -11,11 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks import refcounts
-from benchmarks.compare_commits import higher_is_faster, measurements, paired_case, plot_ratios, run_benchmark
 from benchmarks.env_speed import ceilings
-from benchmarks.profile_env import RUNTIME_BLOCK, attribute, profile
-from benchmarks.refcounts import by_function, debug_cache, demangle, hits
 from benchmarks.speed_vs_error import (
     OUTCOME_DEFAULT,
     OUTCOME_REFERENCE,
@@ -23,7 +19,11 @@ from benchmarks.speed_vs_error import (
     plot_grasp_outcomes,
     summarize_outcomes,
 )
-from scripts.golden_outputs import compare
+from tools import refcounts
+from tools.compare_commits import higher_is_faster, measurements, paired_case, plot_ratios, run_benchmark
+from tools.golden_outputs import compare
+from tools.profile_env import RUNTIME_BLOCK, attribute, profile
+from tools.refcounts import by_function, debug_cache, demangle, hits
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -69,7 +69,7 @@ def test_compare_commits_keeps_measurements_and_leaves_out_ratios_and_goals():
 
 
 def test_compare_commits_refuses_an_unknown_base():
-    out = subprocess.run([sys.executable, "-m", "benchmarks.compare_commits", "--base", "no-such-commit"], cwd=ROOT,
+    out = subprocess.run([sys.executable, "-m", "tools.compare_commits", "--base", "no-such-commit"], cwd=ROOT,
                          capture_output=True, text=True, timeout=120)
     assert out.returncode != 0
     assert "--base 'no-such-commit' is not a commit" in out.stderr
@@ -279,7 +279,7 @@ def test_refcounts_names_numbas_functions_and_gives_each_return_address_to_the_f
 
 def test_compare_commits_refuses_a_revision_that_is_not_a_commit():
     tree = subprocess.run(["git", "rev-parse", "HEAD^{tree}"], cwd=ROOT, capture_output=True, text=True).stdout
-    out = subprocess.run([sys.executable, "-m", "benchmarks.compare_commits", "--base", tree.strip()], cwd=ROOT,
+    out = subprocess.run([sys.executable, "-m", "tools.compare_commits", "--base", tree.strip()], cwd=ROOT,
                          capture_output=True, text=True, timeout=120)
     assert out.returncode != 0
     assert "is not a commit" in out.stderr
@@ -404,7 +404,7 @@ def test_env_speed_ceiling_is_substeps_times_the_fingers_alone_and_gives_each_go
 
 
 def test_first_step_refuses_an_unknown_model_rounds_or_base(capsys):
-    from benchmarks import first_step
+    from tools import first_step
 
     for argv, named in ((["--models", "4d"], "--models"), (["--rounds", "0"], "--rounds"),
                         (["--base", "no-such-commit"], "--base")):
@@ -414,7 +414,7 @@ def test_first_step_refuses_an_unknown_model_rounds_or_base(capsys):
 
 
 def test_first_step_adds_a_processes_phases_and_plots_its_bars(tmp_path):
-    from benchmarks.first_step import plot, total
+    from tools.first_step import plot, total
 
     phases = {"import": {"wall_s": 1.0, "cpu_s": 0.5}, "make_and_reset": {"wall_s": 2.0, "cpu_s": 1.5},
               "first_step": {"wall_s": 40.0, "cpu_s": 30.0}}
@@ -422,3 +422,16 @@ def test_first_step_adds_a_processes_phases_and_plots_its_bars(tmp_path):
     results = {"trees": {"this": {"3d": {"empty_cache": phases, "warm_cache": phases}}}}
     plot(results, ["3d"], tmp_path / "first_step.png")
     assert (tmp_path / "first_step.png").stat().st_size > 0
+
+
+def test_first_step_times_the_demos_own_commands(tmp_path):
+    """The demo it times is scripts/demo.sh's, command for command, so the two cannot drift apart."""
+    from tools.first_step import demo_commands
+
+    commands = demo_commands(tmp_path)
+    script = (Path(__file__).resolve().parents[1] / "scripts" / "demo.sh").read_text()
+    assert len(commands) == script.count("\n.venv/bin/python ") >= 3
+    assert all(command[0] == sys.executable and command[1] == "-m" for command in commands)
+    assert [command[2] for command in commands] == ["examples.reproduce_paper", "examples.record_video",
+                                                    "examples.record_video"]
+    assert all(str(tmp_path) in " ".join(command) and "$out" not in " ".join(command) for command in commands)

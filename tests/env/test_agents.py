@@ -76,7 +76,7 @@ def test_a_checkpoint_is_the_shorter_run_it_passes_through(tmp_path):
     from agents import train_ppo
 
     rollout = 4 * train_ppo.PPO_SETTINGS["n_steps"]  # env steps per rollout with 4 envs
-    common = ["--num-envs", "4", "--eval-episodes", "0", "--validate-every", "0", "--seed", "3"]
+    common = ["--num-envs", "4", "--eval-episodes", "0", "--validate-every", "0", "--seed", "3", "--model", "planar"]
     train_ppo.main(["--out", str(tmp_path / "long"), "--timesteps", str(3 * rollout),
                     "--checkpoint-every", str(2 * rollout - 24), *common])
     train_ppo.main(["--out", str(tmp_path / "short"), "--timesteps", str(2 * rollout), "--checkpoint-every", "0",
@@ -99,12 +99,19 @@ def test_a_checkpoint_is_the_shorter_run_it_passes_through(tmp_path):
     assert not all(torch.equal(value, long_weights[name]) for name, value in weights[0].items())
 
 
+def test_ppo_trains_in_the_envs_default_model_by_default():
+    from agents import train_ppo
+    from soft_gripper_env.grasp_task import GraspTask
+
+    assert train_ppo.build_parser().parse_args(["--out", "x"]).model == GraspTask().model == "3d"
+
+
 def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_path):
     import torch
 
     from agents import train_ppo
 
-    results = train_ppo.main(["--out", str(tmp_path), "--timesteps", "256", "--num-envs", "4",
+    results = train_ppo.main(["--out", str(tmp_path), "--timesteps", "256", "--num-envs", "4", "--model", "planar",
                               "--eval-episodes", "1", "--validate-every", "128", "--validation-episodes", "2"])
     saved = json.loads((tmp_path / "evaluation.json").read_text())
     for name in ("ppo", "ramp", "reactive"):
@@ -308,12 +315,22 @@ def run_script(*args, timeout=600):
 
 
 @pytest.mark.slow
-def test_record_video_example_writes_an_mp4(tmp_path):
-    out = run_script("-m", "examples.record_ramp_video", "--out", str(tmp_path), "--seed", "3")
+def test_record_video_example_writes_an_mp4_a_gif_and_a_frame(tmp_path):
+    out = run_script("-m", "examples.record_video", "--out", str(tmp_path), "--policy", "reactive", "--seed", "3",
+                     "--gif", "--frame-at", "1")
     assert out.returncode == 0, out.stderr
-    video = tmp_path / "ramp-episode-0.mp4"
+    video = tmp_path / "reactive-episode-0.mp4"
     assert video.exists() and video.stat().st_size > 10_000
     assert "success" in out.stdout
+    from PIL import Image
+
+    with Image.open(tmp_path / "reactive-episode-0.gif") as gif:
+        # 81 frames (the reset and 80 steps: held to the end), every second one, at half size
+        assert gif.n_frames == 41 and gif.size == (240, 240)
+    with Image.open(tmp_path / "reactive-episode-0-1s.png") as frame:
+        assert frame.size == (480, 480) and len(set(frame.getdata())) > 50
+    refused = run_script("-m", "examples.record_video", "--out", str(tmp_path), "--frame-at", "5")
+    assert refused.returncode == 2 and "--frame-at 5.0 is outside the episode, [0, 4.0] s" in refused.stderr
 
 
 @pytest.mark.slow

@@ -468,7 +468,7 @@ def _rod_system(r, q, step, rods, terms, solver, measured, holds, fixed_object, 
     scaled residual and ``largest``."""
     # whether the object is fixed comes as a flag, not as the coupling itself: this runs once per rod and Newton
     # iteration, and binding the coupling's two dozen arrays each time cost about a thousand reference-count
-    # operations per planar env step (benchmarks/refcounts.py)
+    # operations per planar env step (tools/refcounts.py)
     if holds is not None and fixed_object:
         _slide_on_fixed_object(r, q, holds, normals)
     return _rod_equations(r, q, step, rods, terms, solver, measured, holds, residual, right_hand_side, largest, band,

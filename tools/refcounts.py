@@ -1,6 +1,6 @@
 """Numba's atomic reference counts per call of the rods' step kernel, this tree against an older commit.
 
-    python -m benchmarks.refcounts [--base COMMIT] [--calls 100] [--json out/refcounts.json]
+    python -m tools.refcounts [--base COMMIT] [--calls 100] [--json out/refcounts.json]
 
 Every array a compiled function binds (an argument, a bundle's member, a view) costs Numba an atomic increment and
 decrement of its reference count unless its optimiser proves the pair unneeded. Uncontended, each is a locked
@@ -12,7 +12,7 @@ the arguments of ``--calls`` of its calls of the step kernel (``simulator.advanc
 the kernel with them once to warm up, and then counts, with a breakpoint on each, how often ``NRT_incref`` and
 ``NRT_decref`` run while it calls the kernel with them again. Needs gdb.
 
-    python -m benchmarks.refcounts --env MODEL [--steps 1] [--json out/refcounts_env.json]
+    python -m tools.refcounts --env MODEL [--steps 1] [--json out/refcounts_env.json]
 
 counts them instead over whole steps of the environment (``SoftGripperUnderwater-v0`` in ``MODEL``, random actions
 after a dozen), each a control interval of physics steps in one compiled call with the free sphere and the
@@ -20,7 +20,7 @@ corrector, and says which compiled function makes them: a breakpoint reads each 
 falls in a function of the control interval's machine code (a function that Numba or LLVM has inlined counts as its
 caller). That shows where a step's reference counts are worth removing. Needs gdb and readelf.
 
-    python -m benchmarks.refcounts --env MODEL --lines [--json F]
+    python -m tools.refcounts --env MODEL --lines [--json F]
 
 also gives each operation to the line of Python source whose code makes it (a line of a function Numba inlined
 counts as its own). For that the child compiles the package with Numba's debug information
@@ -31,7 +31,7 @@ first run of a version compiles everything, ten minutes or more, then counts in 
 ``addr2line`` reads the lines from the object's line table. The totals should match a run without ``--lines``; the
 JSON holds both views.
 
-    python -m benchmarks.refcounts --env MODEL --allocations [--lines] [--json F]
+    python -m tools.refcounts --env MODEL --allocations [--lines] [--json F]
 
 counts the arrays that compiled code allocates instead (calls of Numba's runtime allocators, :data:`ALLOCATORS`),
 by function, or line, the same way: each is a heap allocation and, later, its free.
@@ -51,7 +51,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from benchmarks.compare_commits import ISOLATE, ROOT, resolve, worktree
+from tools.compare_commits import ISOLATE, ROOT, resolve, worktree
 
 MODELS = ("planar", "3d")
 
@@ -114,7 +114,7 @@ import gymnasium as gym
 from numba.core.runtime import rtsys
 import soft_gripper_env
 from soft_gripper_env.physics.solvers import stepping
-from benchmarks.refcounts import function_symbols
+from tools.refcounts import function_symbols
 env = gym.make(soft_gripper_env.ENV_ID, model=model)
 env.action_space.seed(0)
 env.reset(seed=0)

@@ -1,13 +1,13 @@
 """Where an env step's time goes, by compiled function: a sampling profile of the environment under ``perf``.
 
-    python -m benchmarks.profile_env [--model planar|3d] [--envs 64] [--steps 100] [--policy random|reactive]
+    python -m tools.profile_env [--model planar|3d] [--envs 64] [--steps 100] [--policy random|reactive]
                                      [--json out/profile_env.json]
 
 It runs ``SoftGripperUnderwater-v0`` (one env, or ``gym.make_vec`` with ``--envs``) on random actions, or grasping
 under the reactive controller (``agents.scripted.ReactivePolicy``, as ``env_speed``'s grasping figures), in a child
 process under ``perf record``, one Numba and one BLAS thread, and gives each sample to the function whose code
 holds it: the compiled control interval's functions (``solvers.stepping.take_steps`` and everything Numba or LLVM
-linked into it, read from its object code as Numba loads it, as :mod:`benchmarks.refcounts` does), or the symbol
+linked into it, read from its object code as Numba loads it, as :mod:`tools.refcounts` does), or the symbol
 ``perf`` names (the interpreter, NumPy, the C library). Samples in Numba's runtime, whose ``NRT_incref`` and
 ``NRT_decref`` are the atomic reference counts, have no symbol ``perf`` can read; they count as
 ``runtime (reference counts)`` when they fall in the runtime's small block of code around those two functions.
@@ -29,8 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.compare_commits import ROOT
-from benchmarks.refcounts import _require, _write_json, by_function, function_symbols
+from tools.compare_commits import ROOT
+from tools.refcounts import _require, _write_json, by_function, function_symbols
 
 RUNTIME_BLOCK = 64
 """Bytes from ``NRT_incref``'s start within which a sample counts as the reference counts (the two functions and
@@ -59,7 +59,7 @@ import gymnasium as gym
 from numba.core.runtime import rtsys
 import soft_gripper_env
 from soft_gripper_env.physics.solvers import stepping
-from benchmarks.refcounts import function_symbols
+from tools.refcounts import function_symbols
 env = (gym.make(soft_gripper_env.ENV_ID, model=model) if envs == 1 else
        gym.make_vec(soft_gripper_env.ENV_ID, num_envs=envs, model=model))
 if policy == 'reactive':
@@ -97,7 +97,7 @@ sys.stdin.readline()  # the parent has stopped sampling: the interpreter's shutd
 def attribute(samples: list[tuple[int, str]], base: int, symbols: dict[str, tuple[int, int]],
               runtime: int) -> dict[str, int]:
     """Samples per function, most first, from (instruction address, ``perf``'s symbol) pairs: an address in the
-    control interval's object (which starts at ``base``) goes to its compiled function (:func:`~benchmarks.
+    control interval's object (which starts at ``base``) goes to its compiled function (:func:`~tools.
     refcounts.by_function`), one within :data:`RUNTIME_BLOCK` bytes of ``runtime`` (``NRT_incref``) to the
     reference counts, any other to ``perf``'s symbol."""
     totals: dict[str, int] = {}

@@ -1,7 +1,7 @@
 """Speed of this tree against an older commit, side by side in one run: the anchor is timed with the same machine
 load, so the ratio holds even when the machine's own speed drifts.
 
-    python -m benchmarks.compare_commits --base COMMIT [--benchmarks core_speed env_speed] [--rounds 3]
+    python -m tools.compare_commits --base COMMIT [--benchmarks core_speed env_speed] [--rounds 3]
         [--repeats 3] [--clock wall|cpu] [--paired] [--json out/compare_commits.json]
         [--plot out/compare_commits.png]
 

@@ -1,7 +1,7 @@
 """Golden outputs for refactors: record what the simulator and the env produce, and compare two recordings.
 
-    python -m scripts.golden_outputs record out/golden/before.npz [--quick]
-    python -m scripts.golden_outputs compare out/golden/before.npz out/golden/after.npz
+    python -m tools.golden_outputs record out/golden/before.npz [--quick]
+    python -m tools.golden_outputs compare out/golden/before.npz out/golden/after.npz
 
 A refactor that keeps the arithmetic must reproduce every array bit for bit; one that reorders floating-point
 operations must stay within ``--tolerance`` (1e-12 by default, metres for positions). ``compare`` prints, per

@@ -1,7 +1,7 @@
 """How long a new user waits for the first env step: the kernels compiled from an empty Numba cache, then loaded
 from the cache by a later run, for this tree and (the anchor, timed in the same run) an older commit.
 
-    python -m benchmarks.first_step [--base COMMIT] [--models 3d,planar] [--rounds 1] [--demo]
+    python -m tools.first_step [--base COMMIT] [--models 3d,planar] [--rounds 1] [--demo]
         [--json out/first_step.json] [--plot out/first_step.png]
 
 Each measurement is a process of its own whose Numba cache is a fresh, empty folder (``NUMBA_CACHE_DIR``): it
@@ -18,13 +18,14 @@ import argparse
 import contextlib
 import json
 import os
+import shlex
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.compare_commits import ISOLATE, resolve, worktree
+from tools.compare_commits import ISOLATE, resolve, worktree
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ("3d", "planar")
@@ -71,14 +72,21 @@ def total(phases: dict[str, dict[str, float]], clock: str) -> float:
     return sum(spent[clock] for spent in phases.values())
 
 
+def demo_commands(out: Path) -> list[list[str]]:
+    """The README's demo of this tree: the Python commands of scripts/demo.sh (without its set-up), writing under
+    ``out``."""
+    lines = (ROOT / "scripts" / "demo.sh").read_text().splitlines()
+    return [[sys.executable, *shlex.split(line.replace("$out", str(out)))[1:]] for line in lines
+            if line.startswith(".venv/bin/python ")]
+
+
 def time_demo() -> dict[str, float]:
-    """The README's demo of this tree (its two Python commands, without the set-up) from an empty cache [s]."""
+    """The README's demo of this tree from an empty cache [s]."""
     with tempfile.TemporaryDirectory() as tmp:
         environment = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "cache"))
         start_wall, start_cpu = time.perf_counter(), _children_cpu()
-        for module, folder in (("examples.reproduce_paper", "paper"), ("examples.record_ramp_video", "video")):
-            subprocess.run([sys.executable, "-m", module, "--out", str(Path(tmp) / folder)], cwd=ROOT,
-                           env=environment, check=True, capture_output=True)
+        for command in demo_commands(Path(tmp) / "out"):
+            subprocess.run(command, cwd=ROOT, env=environment, check=True, capture_output=True)
         return {"wall_s": time.perf_counter() - start_wall, "cpu_s": _children_cpu() - start_cpu}
 
 
