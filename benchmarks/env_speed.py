@@ -43,6 +43,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from benchmarks._timing import save_plot, time_ramp  # (sets one thread first)
+from benchmarks.core_speed import GOALS as CORE_GOALS
 from soft_gripper_env.env import DEFAULT_MAX_EPISODE_STEPS
 from soft_gripper_env.grasp_task import GraspTask, task_episode
 from soft_gripper_env.physics import Scene
@@ -55,8 +56,6 @@ GOALS = {"single_steps_per_s": 2.0, "vec64_steps_per_s": 10.0, "single_3d_steps_
 """Goals as ratios to Ant-v5 of the same run."""
 TWO_THREAD_GOAL = 1.7
 """Two threads against one, make_vec(64), planar."""
-CORE_GOALS = {"paper_scene_planar_ms": 2.0, "paper_scene_3d_ms": 10.0, "batched_planar_us_per_gripper_step": 10.0}
-"""The physics core's goals, absolute on the reference 2-core machine."""
 CEILING_BATCH = 64
 """Grippers stepped together for the ceiling (the fingers alone): a batch shares each step's fixed costs, so their
 cost per gripper is the least."""
