@@ -2,7 +2,10 @@
 validation seeds against env steps and against training wall time, each run and their mean, with the scripted
 controllers' and the final policies' held-out success as lines.
 
-    python -m agents.learning_curves DIR [DIR ...] --out FIGURE.png
+    python -m agents.learning_curves DIR [DIR ...] --out FIGURE.png [--baseline LABEL=EVALUATION.json ...]
+
+``--baseline`` draws a controller's success from an ``agents.evaluate --json`` file as a line too: measured on
+the validation seeds (``--seed 500000 --episodes 64``), it compares with the curves seed for seed.
 """
 
 from __future__ import annotations
@@ -28,10 +31,11 @@ def load_run(run_dir: Path) -> dict:
     return run
 
 
-def plot_learning_curves(runs: list[dict], path: Path) -> None:
+def plot_learning_curves(runs: list[dict], path: Path, baselines: dict[str, dict] | None = None) -> None:
     """Validation success against env steps (left) and training wall time (right): one thin line per run, their
     mean in bold where there are several; the held-out success of the scripted controllers (mean over the runs'
-    evaluations) and of each final policy as horizontal lines."""
+    evaluations) and of each final policy as horizontal lines, and each of ``baselines`` (label → an
+    ``agents.evaluate`` result) as a line of its own."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -62,6 +66,10 @@ def plot_learning_curves(runs: list[dict], path: Path) -> None:
         if rates:
             for ax in axes:
                 ax.axhline(np.mean(rates), ls=style, color="0.25", lw=1.4, label=f"{name} controller (held-out)")
+    for k, (label, result) in enumerate((baselines or {}).items()):
+        for ax in axes:
+            ax.axhline(result["success_rate"], ls=(0, (5, 1 + 2 * k)), color=f"C{len(runs) + k + 1}", lw=1.6,
+                       label=f"{label} ({result['episodes']} seeds from {result['first_seed']:,})")
     finals = [run["evaluation"]["ppo"]["success_rate"] for run in runs if "ppo" in run["evaluation"]]
     if finals:
         for ax in axes:
@@ -90,12 +98,26 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("runs", nargs="+", type=Path, help="train_ppo output folders")
     parser.add_argument("--out", type=Path, required=True, help="the figure (PNG)")
+    parser.add_argument("--baseline", action="append", default=[], metavar="LABEL=FILE",
+                        help="a controller's agents.evaluate --json result, drawn as a line (repeatable)")
     args = parser.parse_args(argv)
+    baselines = {}
+    for item in args.baseline:
+        label, _, file = item.partition("=")
+        if not label or not file:
+            parser.error(f"--baseline {item!r} is not LABEL=FILE")
+        try:
+            result = json.loads(Path(file).read_text())
+        except (OSError, ValueError) as error:
+            parser.error(f"--baseline {item!r}: cannot read {file}: {error}")
+        if not {"success_rate", "episodes", "first_seed"} <= set(result):
+            parser.error(f"--baseline {item!r}: {file} is not an agents.evaluate --json result")
+        baselines[label] = result
     try:
         runs = [load_run(run) for run in args.runs]
     except FileNotFoundError as error:
         parser.error(str(error))
-    plot_learning_curves(runs, args.out)
+    plot_learning_curves(runs, args.out, baselines)
 
 
 if __name__ == "__main__":

@@ -132,14 +132,7 @@ PAIRED_CASES = {"seed_scene_planar_s": ("planar", 1), "seed_scene_3d_s": ("3d", 
 paper scene's scripted run through the public ``paper_scene`` and ``run_ramp``, which every commit since the
 layering has."""
 
-_PAIRED_ENV_RUNNER = ISOLATE + """
-import json
-import os
-import time
-clock = time.process_time if sys.argv[2] == 'cpu' else time.perf_counter
-model, num_envs, repeats, steps, policy = sys.argv[3], int(sys.argv[4]), int(sys.argv[5]), int(sys.argv[6]), sys.argv[7]
-os.environ.setdefault('NUMBA_NUM_THREADS', '1')
-sys.path[:0] = [tree]
+ENV_AND_POLICY = """
 import gymnasium as gym
 import soft_gripper_env
 env = (gym.make(soft_gripper_env.ENV_ID, model=model) if num_envs == 1 else
@@ -152,6 +145,20 @@ else:
     act = lambda observation: env.action_space.sample()
 env.action_space.seed(0)
 observation, _ = env.reset(seed=0)
+"""
+"""Child-script lines that make the env (``model``, ``num_envs``) and its driver ``act`` (``policy``: random actions
+or the reactive controller) through public names every commit since the env has, and reset it: shared by the
+paired timings here and ``tools.profile_env``."""
+
+_PAIRED_ENV_RUNNER = ISOLATE + """
+import json
+import os
+import time
+clock = time.process_time if sys.argv[2] == 'cpu' else time.perf_counter
+model, num_envs, repeats, steps, policy = sys.argv[3], int(sys.argv[4]), int(sys.argv[5]), int(sys.argv[6]), sys.argv[7]
+os.environ.setdefault('NUMBA_NUM_THREADS', '1')
+sys.path[:0] = [tree]
+""" + ENV_AND_POLICY + """
 def run():
     global observation
     for _ in range(steps):

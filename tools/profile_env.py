@@ -29,7 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from tools.compare_commits import ROOT
+from tools.compare_commits import ENV_AND_POLICY, ROOT
 from tools.refcounts import _require, _write_json, by_function, function_symbols
 
 RUNTIME_BLOCK = 64
@@ -55,22 +55,11 @@ def keep(library, value):
     return set_compiled_object(library, value)
 codegen.CPUCodeLibrary._set_compiled_object = keep
 from pathlib import Path
-import gymnasium as gym
 from numba.core.runtime import rtsys
-import soft_gripper_env
 from soft_gripper_env.physics.solvers import stepping
 from tools.refcounts import function_symbols
-env = (gym.make(soft_gripper_env.ENV_ID, model=model) if envs == 1 else
-       gym.make_vec(soft_gripper_env.ENV_ID, num_envs=envs, model=model))
-if policy == 'reactive':
-    from agents.scripted import ReactivePolicy
-    from soft_gripper_env.grasp_task import GraspTask
-    act = ReactivePolicy(GraspTask(model=model))
-else:
-    act = lambda observation: env.action_space.sample()
-env.action_space.seed(0)
-observation, _ = env.reset(seed=0)
-def run(n):
+num_envs = envs
+""" + ENV_AND_POLICY + """def run(n):
     global observation
     for _ in range(n):
         observation, _, terminated, truncated, _ = env.step(act(observation))

@@ -213,6 +213,33 @@ def test_learning_curves_of_several_runs_and_a_folder_without_a_curve(tmp_path):
     assert out.returncode == 2 and "has no curve.json" in out.stderr and not (tmp_path / "none.png").exists()
 
 
+def test_learning_curves_draw_a_controller_evaluated_on_the_validation_seeds(tmp_path):
+    """``--baseline LABEL=FILE`` draws an agents.evaluate result as a line; a file that is not one is refused."""
+    from agents.learning_curves import load_run, plot_learning_curves
+
+    run = tmp_path / "seed0"
+    run.mkdir()
+    validation = [{"steps": 50_000, "training_wall_s": 300.0, "success_rate": 0.5, "mean_return": 0.0,
+                   "mean_peak_contact_force_N": 1.0}]
+    (run / "curve.json").write_text(json.dumps({"episodes": [], "validation": validation}))
+    controller = {"success_rate": 0.84, "episodes": 64, "first_seed": 500_000}
+    (tmp_path / "reactive.json").write_text(json.dumps(controller))
+    plot_learning_curves([load_run(run)], tmp_path / "direct.png", {"reactive": controller})
+    import matplotlib.image
+
+    lines = matplotlib.image.imread(tmp_path / "direct.png")
+    plot_learning_curves([load_run(run)], tmp_path / "without.png")
+    assert lines.shape == matplotlib.image.imread(tmp_path / "without.png").shape
+    assert not np.array_equal(lines, matplotlib.image.imread(tmp_path / "without.png"))  # the line is drawn
+    out = run_script("-m", "agents.learning_curves", str(run), "--out", str(tmp_path / "curves.png"),
+                     "--baseline", f"reactive={tmp_path / 'reactive.json'}")
+    assert out.returncode == 0, out.stderr
+    (tmp_path / "other.json").write_text(json.dumps({"validation": []}))
+    out = run_script("-m", "agents.learning_curves", str(run), "--out", str(tmp_path / "bad.png"),
+                     "--baseline", f"reactive={tmp_path / 'other.json'}")
+    assert out.returncode == 2 and "is not an agents.evaluate --json result" in out.stderr
+
+
 def test_evaluate_runs_seeds_as_single_envs_do():
     """Batched evaluation gives each seed the episode a single env with that seed gives: the same return."""
     from agents.evaluate import ENDINGS, evaluate
