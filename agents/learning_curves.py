@@ -68,7 +68,7 @@ def plot_learning_curves(runs: list[dict], path: Path, baselines: dict[str, dict
                 ax.axhline(np.mean(rates), ls=style, color="0.25", lw=1.4, label=f"{name} controller (held-out)")
     for k, (label, result) in enumerate((baselines or {}).items()):
         for ax in axes:
-            ax.axhline(result["success_rate"], ls=(0, (5, 1 + 2 * k)), color=f"C{len(runs) + k + 1}", lw=1.6,
+            ax.axhline(result["success_rate"], ls=(0, (5, 1 + 2 * k)), color=f"C{8 + k % 2}", lw=1.8,
                        label=f"{label} ({result['episodes']} seeds from {result['first_seed']:,})")
     finals = [run["evaluation"]["ppo"]["success_rate"] for run in runs if "ppo" in run["evaluation"]]
     if finals:

@@ -8,8 +8,9 @@ Each measurement is a process of its own whose Numba cache is a fresh, empty fol
 imports the package, makes the env (``gym.make("SoftGripperUnderwater-v0", model=...)``), resets it and takes one
 step, and reports the wall and CPU time of each phase; a second process then does the same from the cache the first
 one filled. The trees alternate within a round, and across rounds the least time counts. ``--demo`` also times the
-README's demo (the paper's figures and the env's video) from an empty cache, this tree only. Compilation is
-single-threaded, so the CPU time is the figure least disturbed by other load on the machine.
+README's demo (scripts/demo.sh's commands: the paper's figures and two episodes' videos) from an empty cache, this
+tree only. Compilation is single-threaded, so the CPU time is the figure least disturbed by other load on the
+machine.
 """
 
 from __future__ import annotations

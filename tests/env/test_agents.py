@@ -13,7 +13,7 @@ import pytest
 
 import soft_gripper_env
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
-from agents.scripted import ConstantPolicy, RampPolicy, RandomPolicy
+from agents.scripted import ConstantPolicy, RampPolicy, RandomPolicy, ReactivePolicy
 from soft_gripper_env.env import observation_bounds, observation_slices
 from soft_gripper_env.grasp_task import GraspTask
 
@@ -514,3 +514,18 @@ def test_evaluate_runs_a_policy_only_with_the_closing_reflexes_it_was_trained_wi
     out = run_script("-m", "agents.evaluate", "--policy", "reactive", "--episodes", "1",
                      "--touching-closing-rate", "0")
     assert out.returncode == 2 and "--touching-closing-rate = 0.0 1/s is outside the allowed range" in out.stderr
+
+
+def test_the_reactive_controller_tuned_in_3d_is_a_named_policy():
+    from agents.evaluate import make_policy
+    from agents.scripted import TUNED_3D_GAINS
+
+    policy = make_policy("reactive_tuned", GraspTask(), 0)
+    assert isinstance(policy, ReactivePolicy)
+    gains = (policy.grip, policy.gust_grip, policy.gain)
+    assert gains == tuple(TUNED_3D_GAINS[name] for name in ("grip", "gust_grip", "gain"))
+    assert (policy.grip, policy.gust_grip, policy.gain) != (ReactivePolicy().grip, ReactivePolicy().gust_grip,
+                                                           ReactivePolicy().gain)
+    out = run_script("-m", "agents.evaluate", "--policy", "reactive_tuned", "--episodes", "1", "--model", "planar",
+                     "--json", "/dev/null")
+    assert out.returncode == 0, out.stderr
