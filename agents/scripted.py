@@ -57,7 +57,7 @@ class RandomPolicy:
 
 TUNED_3D_GAINS = {"grip": 0.3, "gust_grip": 0.3, "gain": 0.1}
 """The reactive controller's gains tuned again in the default 3-D model (Δt 2.5 ms, four friction passes) with the
-PPO policies' closing reflexes, on tuning seeds 5000–5199 only (14 settings of ``grip``, ``gust_grip`` and
+PPO policies' closing reflexes, on tuning seeds 5000–5199 only (16 settings of ``grip``, ``gust_grip`` and
 ``gain``; docs/notes/ppo_experiments.md): success 0.885 at a mean peak force of 1.66 N there, against 0.835 at
 1.96 N with the defaults. ``agents.evaluate --policy reactive_tuned`` runs it: the fair baseline for a policy
 trained in 3-D."""
