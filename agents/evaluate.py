@@ -288,8 +288,7 @@ def main(argv: list[str] | None = None) -> dict:
     if args.num_envs < 1:
         parser.error(f"--num-envs = {args.num_envs} must be at least 1")
     if args.policy not in (*SCRIPTED, "pretrained") and not Path(args.policy).is_dir():
-        parser.error(f"--policy = {args.policy!r} is not random, ramp, reactive, reactive_tuned, pretrained or a "
-                     f"folder")
+        parser.error(f"--policy = {args.policy!r} is not {', '.join((*SCRIPTED, 'pretrained'))} or a folder")
     reflexes = reflex_settings(args)
     trained = {} if args.policy in SCRIPTED else \
         trained_task(PRETRAINED if args.policy == "pretrained" else Path(args.policy))

@@ -529,3 +529,9 @@ def test_the_reactive_controller_tuned_in_3d_is_a_named_policy():
     out = run_script("-m", "agents.evaluate", "--policy", "reactive_tuned", "--episodes", "1", "--model", "planar",
                      "--json", "/dev/null")
     assert out.returncode == 0, out.stderr
+
+
+def test_evaluate_refuses_an_unknown_policy_naming_the_ones_it_knows():
+    out = run_script("-m", "agents.evaluate", "--policy", "no_such_policy", "--episodes", "1")
+    assert out.returncode == 2
+    assert "'no_such_policy' is not random, ramp, reactive, reactive_tuned, pretrained or a folder" in out.stderr

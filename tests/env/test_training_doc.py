@@ -4,6 +4,7 @@
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -39,5 +40,16 @@ def test_the_shipped_policy_runs_in_a_users_loop(monkeypatch, capsys):
 
 
 def test_the_vector_loop_keeps_only_real_transitions():
-    namespace = _run(BLOCKS[2])
-    assert namespace["keep"].shape == (8,)
+    """Run as written, with a recorder after each step: the steps the loop drops are exactly the autoreset steps
+    (reward 0, neither terminated nor truncated), and there are some (episodes last at most 80 of its 100 steps)."""
+    recorded = []
+    record = "    observation = next_observation\n"
+    assert record in BLOCKS[2]
+    block = BLOCKS[2].replace(record, record + "    _record(keep, reward, terminated, truncated)\n")
+    namespace = {"_record": lambda *arrays: recorded.append([np.array(a) for a in arrays])}
+    exec(compile(block, "docs/training.md", "exec"), namespace)  # noqa: S102 - our own documentation
+    keep, reward, terminated, truncated = (np.array(column) for column in zip(*recorded, strict=True))
+    assert keep.shape == (100, 8) and (~keep).any()
+    dropped = ~keep
+    assert np.all(reward[dropped] == 0.0) and not terminated[dropped].any() and not truncated[dropped].any()
+    assert np.array_equal(dropped[1:], terminated[:-1] | truncated[:-1])  # the step after an episode ends
