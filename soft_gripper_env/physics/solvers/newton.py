@@ -381,53 +381,69 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
             turned(motion.rotation[b], motion.old.orientation[b], work.rotation, motion.orientation[b])
             body_residual(b, coupling.body, motion, motion.orientation[b], step.dt, work.body_residual,
                           work.body_matrix)
-        for f in range(n_fingers):
-            if not active[f]:
-                continue
-            if holds is not None and coupling is not None and touching[f]:
-                _place_held_nodes(b, first + f, q, holds, coupling, work.coupling[f], work.normals[f],
-                                  work.body_residual)
-            rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds,
-                                                not coupled, residual[first + f], x0[f], largest, bands[f], scratch,
-                                                work.normals[f], work.basis, matrices)
-            if coupling is None and rubbing[f]:
-                if it > 0:  # back off a step that made the rod's residual worse
-                    halving = 0
-                    while not rod_ratio[f] < last_ratio[f] and halving < MAX_STEP_HALVINGS:
-                        halving += 1
-                        _back_off_rod(first + f, q, work.rod_delta[f], 0.5**halving)
-                        rod_ratio[f], largest = _rod_system(first + f, q, step, rods, terms, solver, measured, holds,
-                                                            not coupled, residual[first + f], x0[f], largest,
-                                                            bands[f], scratch, work.normals[f], work.basis, matrices)
-                last_ratio[f] = rod_ratio[f]
-            if coupling is not None:
-                if touching[f]:
-                    _load_body(x0[f], work.coupling[f], work.body_residual)
-        if coupling is not None:
-            largest = _body_residual_in_basis(coupling.basis[b], solver.body_tolerance, work.body_residual,
-                                              work.body_total, largest)
-            if largest <= 1.0:
-                gripper_ratio = largest
-                _finish_gripper(first, n_fingers, True, iterations, gripper_ratio, result)
-                return
-            if it > 0 and not largest < gripper_ratio and halvings < MAX_STEP_HALVINGS:
-                # the last step made the residual worse (a new hold far from the body can throw Newton off): go
-                # back and take half of it
-                halvings += 1
-                _back_off(b, first, q, coupling.motion, work, 0.5**halvings)
-                continue
-            gripper_ratio = largest
-            halvings = 0
-            if it == solver.max_iterations:
+        # the rods' equations have one call site, for Numba inlines them whole at each: the first pass assembles
+        # the residuals (and the matrices when ``matrices``), and in 3-D, after a test that fails, a second pass
+        # the matrices
+        after_test = 0  # 0: take a Newton step; 1: go on to the next iteration; 2: stop iterating
+        for matrix_pass in range(2):
+            for f in range(n_fingers):
+                if not active[f]:
+                    continue
+                if matrix_pass == 0 and holds is not None and coupling is not None and touching[f]:
+                    _place_held_nodes(b, first + f, q, holds, coupling, work.coupling[f], work.normals[f],
+                                      work.body_residual)
+                backing_off = matrix_pass == 0 and coupling is None and rubbing[f] and it > 0  # a rubbing rod
+                halving = 0  # backs off a step that made its residual worse, by halves
+                while True:
+                    rod_ratio_now, largest_now = _rod_system(first + f, q, step, rods, terms, solver, measured,
+                                                             holds, matrix_pass == 0 and not coupled,
+                                                             residual[first + f], x0[f], largest, bands[f], scratch,
+                                                             work.normals[f], work.basis, matrices or matrix_pass == 1)
+                    if matrix_pass == 1:
+                        break
+                    rod_ratio[f], largest = rod_ratio_now, largest_now
+                    if not backing_off or rod_ratio[f] < last_ratio[f] or halving >= MAX_STEP_HALVINGS:
+                        break
+                    halving += 1
+                    _back_off_rod(first + f, q, work.rod_delta[f], 0.5**halving)
+                if matrix_pass == 1:
+                    continue
+                if coupling is None and rubbing[f]:
+                    last_ratio[f] = rod_ratio[f]
+                if coupling is not None:
+                    if touching[f]:
+                        _load_body(x0[f], work.coupling[f], work.body_residual)
+            if matrix_pass == 1:
                 break
-        elif not _rods_continue(first, it, solver.max_iterations, result, work):
-            return
+            if coupling is not None:
+                largest = _body_residual_in_basis(coupling.basis[b], solver.body_tolerance, work.body_residual,
+                                                  work.body_total, largest)
+                if largest <= 1.0:
+                    gripper_ratio = largest
+                    _finish_gripper(first, n_fingers, True, iterations, gripper_ratio, result)
+                    return
+                if it > 0 and not largest < gripper_ratio and halvings < MAX_STEP_HALVINGS:
+                    # the last step made the residual worse (a new hold far from the body can throw Newton off):
+                    # go back and take half of it
+                    halvings += 1
+                    _back_off(b, first, q, coupling.motion, work, 0.5**halvings)
+                    after_test = 1
+                    break
+                gripper_ratio = largest
+                halvings = 0
+                if it == solver.max_iterations:
+                    after_test = 2
+                    break
+            elif not _rods_continue(first, it, solver.max_iterations, result, work):
+                return
+            if matrices:
+                break
+        if after_test == 1:
+            continue
+        if after_test == 2:
+            break
         for f in range(n_fingers):
             if active[f]:
-                if not matrices:  # the flag as a variable that is True here: a literal True is a type of its own,
-                    # for which Numba would compile the rod's energies and contact a second time
-                    _rod_equations(first + f, q, step, rods, terms, solver, measured, holds, residual[first + f],
-                                   x0[f], 0.0, bands[f], scratch, work.normals[f], work.basis, not matrices)
                 band = work.bands[f]
                 diagonal = band.shape[1] - 1
                 for j in range(band.shape[0]):
