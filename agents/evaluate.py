@@ -141,6 +141,13 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
     act = ppo_policy(model, normalize, f"the policy in {model_dir}")
     act.trained_task = trained_task(model_dir)
     act.observation = act.trained_task.get("observation", "full")
+    residual = json.loads((model_dir / "config.json").read_text()).get("residual") \
+        if (model_dir / "config.json").exists() else None
+    if residual:  # a correction to a scripted controller (agents.train_ppo --residual-to): run the two together
+        from agents.residual import ResidualAction, residual_policy
+
+        task = GraspTask(**{name: act.trained_task[name] for name in ("model", "observation", *REFLEXES)})
+        act = residual_policy(act, ResidualAction(task, make_policy(residual["base"], task, 0), residual["rate"]))
     return act
 
 

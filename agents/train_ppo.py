@@ -3,7 +3,8 @@
     python -m agents.train_ppo --out DIR [--timesteps 600000] [--seed 0] [--num-envs 32] [--num-threads 2]
         [--model 3d] [--observation sensors] [--validate-every 50000] [--eval-episodes 200]
         [--touching-closing-rate RATE] [--approach-slowing-gap M] [--final-pressure-weight 12]
-        [--pressure-ramp 200000 400000] [--checkpoint-every 100000]
+        [--pressure-ramp 200000 400000] [--checkpoint-every 100000] [--residual-to reactive_tuned]
+        [--residual-rate 0.1]
 
 By default PPO trains in the env's default rod model (3-D; ``--model planar`` costs about a third per step) on the
 sensors' observation (``GraspTask.observation``), whose readings mean the same in both models, so a policy trained
@@ -18,6 +19,10 @@ the run as a run of ``--timesteps N`` would end it, loadable the same way); the 
 return, and the deterministic policy's success on validation seeds every ``--validate-every`` steps, against env
 steps and training wall time (curve.json, learning_curve.png); and, with ``--eval-episodes``, the trained policy and the
 scripted controllers on held-out seeds (evaluation.json; seeds from 1,000,000, which training never draws).
+
+With ``--residual-to CONTROLLER`` PPO learns a correction to a scripted controller instead (agents/residual.py):
+its action adds up to ``--residual-rate`` [1/s] to the controller's rate, finger by finger, and the folder's
+config.json records the controller, so ``agents.evaluate --policy DIR`` runs the two together.
 """
 
 from __future__ import annotations
@@ -38,8 +43,17 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
 import soft_gripper_env
-from agents.evaluate import add_reflexes, evaluate, load_ppo, ppo_policy, reflex_settings, task_from_arguments
+from agents.evaluate import (
+    add_reflexes,
+    evaluate,
+    load_ppo,
+    make_policy,
+    ppo_policy,
+    reflex_settings,
+    task_from_arguments,
+)
 from agents.learning_curves import load_run, plot_learning_curves
+from agents.residual import RESIDUAL_BASES, ResidualAction, ResidualVecEnv, residual_policy
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
 from agents.scripted import RampPolicy, ReactivePolicy
 from soft_gripper_env.grasp_task import MODELS, GraspTask, RewardWeights
@@ -74,6 +88,14 @@ policy's holds (the reactive controller with per-step noise of std 0.2 keeps 50 
 5 %), but the cubic action map turns a narrow start into no motion at all: with std 0.2, PPO's return stayed at
 the passive policy's (about 7) for 200,000 steps, while with std 1 it rose to 75 within 300,000 (seed 0, 3-D;
 docs/notes/ppo_experiments.md)."""
+RESIDUAL_RATE = 0.1
+"""The largest correction a residual policy adds to its controller's rate [1/s] (``--residual-rate``): a third of
+the fastest closing, enough to stop or double the controller's slowed approach and many times its grip's press rate
+(0.02 1/s)."""
+RESIDUAL_POLICY_SETTINGS = {**POLICY_SETTINGS, "log_std_init": float(np.log(0.2))}
+"""A residual policy's network and initial spread: std 0.2, so that its exploration (0.02 1/s at the default
+``--residual-rate``) is about the controller's own press rate, and its first rollouts keep most of the
+controller's grasps rather than shaking them loose."""
 
 
 def ramped(steps: int, start: int, end: int, initial: float, final: float) -> float:
@@ -119,8 +141,9 @@ class ProgressAndCurve(BaseCallback):
     time leaves out the validations' own time."""
 
     def __init__(self, total: int, validate_every: int = 0, episodes: int = VALIDATION_EPISODES,
-                 num_threads: int = 1, **settings) -> None:
+                 num_threads: int = 1, residual: ResidualAction | None = None, **settings) -> None:
         super().__init__()
+        self.residual = residual
         self.total, self.validate_every, self.episodes, self.settings = total, validate_every, episodes, settings
         self.num_threads = min(num_threads, episodes)
         self.curve: list[tuple[int, float, float, float]] = []
@@ -157,6 +180,8 @@ class ProgressAndCurve(BaseCallback):
     def validate(self) -> None:
         began = time.perf_counter()
         policy = ppo_policy(self.model, self.training_env, "the policy in training")
+        if self.residual:
+            policy = residual_policy(policy, self.residual)
         result = evaluate(policy, self.episodes, VALIDATION_SEED, progress=False, num_envs=self.episodes,
                           num_threads=self.num_threads, **self.settings)
         point = {"steps": self.num_timesteps, "training_wall_s": self.training_wall(),
@@ -239,6 +264,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--pressure-ramp", type=int, nargs=2, default=PRESSURE_RAMP, metavar=("START", "END"),
                         help="env steps over which the warning grows to --final-pressure-weight (default "
                              f"{PRESSURE_RAMP[0]} {PRESSURE_RAMP[1]})")
+    parser.add_argument("--residual-to", choices=RESIDUAL_BASES, default=None, metavar="CONTROLLER",
+                        help="learn a correction to this scripted controller (" + ", ".join(RESIDUAL_BASES)
+                             + "; default: none, PPO acts alone)")
+    parser.add_argument("--residual-rate", type=float, default=RESIDUAL_RATE, metavar="RATE",
+                        help=f"the largest correction added to the controller's rate [1/s] (default {RESIDUAL_RATE:g};"
+                             " with --residual-to)")
     parser.add_argument("--eval-episodes", type=int, default=200, help="held-out episodes at the end (0: none)")
     parser.add_argument("--validate-every", type=int, default=50_000,
                         help="env steps between measures of the deterministic policy on validation seeds, the "
@@ -269,16 +300,24 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--pressure-ramp = {start} {end} must satisfy 0 <= START <= END")
     settings = {"model": args.model, "observation": args.observation, **reflex_settings(args)}
     task = task_from_arguments(parser, **settings)
+    if not 0.0 < args.residual_rate <= task.max_curvature_rate:
+        parser.error(f"--residual-rate = {args.residual_rate} is outside (0, {task.max_curvature_rate:g}] 1/s (the "
+                     f"fastest closing)")
     args.out.mkdir(parents=True, exist_ok=True)
 
-    env = VecNormalize(VecMonitor(SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads,
-                                                       **settings),
-                                  info_keywords=("is_success",)), gamma=PPO_SETTINGS["gamma"])
+    venv = SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads, **settings)
+    residual, combine = None, None
+    if args.residual_to:
+        combine = ResidualAction(task, make_policy(args.residual_to, task, args.seed), args.residual_rate)
+        venv = ResidualVecEnv(venv, combine)
+        residual = {"base": args.residual_to, "rate": args.residual_rate}
+    env = VecNormalize(VecMonitor(venv, info_keywords=("is_success",)), gamma=PPO_SETTINGS["gamma"])
+    policy_settings = RESIDUAL_POLICY_SETTINGS if residual else POLICY_SETTINGS
     model = PPO("MlpPolicy", env, batch_size=min(1024, PPO_SETTINGS["n_steps"] * args.num_envs), **PPO_SETTINGS,
-                policy_kwargs=POLICY_SETTINGS, seed=args.seed, verbose=0, device="cpu",
+                policy_kwargs=policy_settings, seed=args.seed, verbose=0, device="cpu",
                 tensorboard_log=str(args.out / "tensorboard"))
     progress = ProgressAndCurve(args.timesteps, args.validate_every, episodes=args.validation_episodes,
-                                num_threads=args.num_threads, **settings)
+                                num_threads=args.num_threads, residual=combine, **settings)
     ramp = PressureWarningRamp(task.reward, args.final_pressure_weight, *args.pressure_ramp)
 
     trained_from = provenance()
@@ -290,7 +329,8 @@ def main(argv: list[str] | None = None) -> dict:
                 # and a run then parts from one made with another count: a run reproduces only with the same one.
                 "torch_threads": torch.get_num_threads(), "model": args.model, "observation": args.observation,
                 "training_wall_s": progress.training_wall(), "validation_wall_s": progress.validating_s,
-                "ppo": PPO_SETTINGS, "policy": POLICY_SETTINGS, "pressure_ramp": ramp.config(),
+                "ppo": PPO_SETTINGS, "policy": policy_settings, "pressure_ramp": ramp.config(),
+                "residual": residual,
                 "task": json.loads(json.dumps(asdict(task), default=repr))}
 
     callbacks = [progress, ramp]

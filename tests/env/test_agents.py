@@ -442,6 +442,12 @@ def test_scripts_reject_bad_arguments(tmp_path):
     out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "ramp"), "--final-pressure-weight", "-1")
     assert out.returncode == 2 and "--final-pressure-weight = -1.0 is outside [0, 1e6]" in out.stderr
     assert not (tmp_path / "ramp").exists()
+    out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "residual"), "--residual-to", "reactive",
+                     "--residual-rate", "0.4")
+    assert out.returncode == 2 and "--residual-rate = 0.4 is outside (0, 0.3] 1/s" in out.stderr, out.stderr
+    out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "residual"), "--residual-to", "ramp")
+    assert out.returncode == 2 and "invalid choice: 'ramp' (choose from 'reactive', 'reactive_tuned')" in out.stderr
+    assert not (tmp_path / "residual").exists()
 
 
 def test_evaluate_refuses_a_policy_trained_on_another_action_map(tmp_path):

@@ -1,0 +1,76 @@
+"""Residual policies: a learnt correction added to a scripted controller's natural-curvature rate.
+
+PPO trained from scratch must first discover how to close on the specimen at all, and the reactive controller
+already does that well; a residual policy starts where the controller is and learns only what to change. The
+policy's action r in [−1, 1] per finger adds ``rate`` × r [1/s] to the rate the controller asks for, and the sum
+goes to the env through the task's action map (:meth:`GraspTask.action_for_rate`, clipped to the fastest rate),
+so the env, its reward and its closing reflexes see one ordinary action, and a residual policy is compared with its
+controller on the same task.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+from soft_gripper_env.grasp_task import GraspTask
+from soft_gripper_env.physics import check_range
+
+RESIDUAL_BASES = ("reactive", "reactive_tuned")
+"""The controllers a residual policy may correct (``agents.evaluate``'s names)."""
+
+
+class ResidualAction:
+    """The env action of ``base``'s rate plus ``rate`` × the residual [1/s], per finger, through ``task``'s action
+    map. ``base`` acts on raw observations (one or a batch), as the scripted controllers do."""
+
+    def __init__(self, task: GraspTask, base: Callable[[np.ndarray], np.ndarray], rate: float) -> None:
+        check_range("ResidualAction", "rate", rate, "1/s", 0.0, task.max_curvature_rate, high_inclusive=True)
+        self.task, self.base, self.rate = task, base, rate
+
+    def __call__(self, observation: np.ndarray, residual: np.ndarray) -> np.ndarray:
+        """The env action [−1, 1] for ``observation`` (raw) and the residual in [−1, 1] (clipped), same shapes."""
+        base_rate = self.task.curvature_rate(np.asarray(self.base(observation), dtype=float))
+        correction = self.rate * np.clip(np.asarray(residual, dtype=float), -1.0, 1.0)
+        return self.task.action_for_rate(base_rate + correction).astype(np.float32)
+
+
+class ResidualVecEnv(VecEnvWrapper):
+    """An SB3 VecEnv whose actions are residuals (:class:`ResidualAction`) on the controller's: it keeps the raw
+    observation of each env (after an autoreset, the next episode's first) for the controller's next action. Wrap
+    it below VecNormalize, whose normalised observations the controller must not see."""
+
+    def __init__(self, venv: VecEnv, combine: ResidualAction) -> None:
+        super().__init__(venv)
+        self.combine = combine
+        self._observation: np.ndarray | None = None
+
+    def reset(self) -> np.ndarray:
+        self._observation = self.venv.reset()
+        return self._observation
+
+    def step_async(self, actions: np.ndarray) -> None:
+        if self._observation is None:
+            raise RuntimeError("ResidualVecEnv.step_async before reset: the controller has no observation to act on")
+        self.venv.step_async(self.combine(self._observation, actions))
+
+    def step_wait(self):
+        observation, reward, done, infos = self.venv.step_wait()
+        self._observation = observation
+        return observation, reward, done, infos
+
+
+def residual_policy(residual: Callable[[np.ndarray], np.ndarray],
+                    combine: ResidualAction) -> Callable[[np.ndarray], np.ndarray]:
+    """The env's policy of a residual one (acting on raw observations, as :func:`agents.evaluate.ppo_policy`
+    gives) and its controller: ``combine``'s action for each observation. Keeps ``residual``'s attributes (its
+    observation size, its training task)."""
+
+    def act(observation: np.ndarray) -> np.ndarray:
+        return combine(observation, residual(observation))
+
+    act.__dict__.update(residual.__dict__)
+    act.residual = combine
+    return act

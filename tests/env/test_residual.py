@@ -1,0 +1,102 @@
+"""Residual policies: a learnt correction to a scripted controller's natural-curvature rate (agents/residual.py)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from agents.residual import ResidualAction, ResidualVecEnv, residual_policy
+from agents.sb3_vec_env import SoftGripperSB3VecEnv
+from agents.scripted import TUNED_3D_GAINS, ReactivePolicy
+from soft_gripper_env.grasp_task import GraspTask
+
+SENSORS = GraspTask(observation="sensors", touching_closing_rate=0.15, approach_slowing_gap=0.01)
+
+
+def observations(count: int, seed: int = 0) -> np.ndarray:
+    """Observations of real episodes (the sensors' layout), some touching and some not."""
+    env = SoftGripperSB3VecEnv(num_envs=count, seed=seed, observation="sensors")
+    obs = env.reset()
+    controller = ReactivePolicy(SENSORS)
+    seen = [obs]
+    for _ in range(40):
+        env.step_async(controller(obs))
+        obs = env.step_wait()[0]
+        seen.append(obs)
+    return np.concatenate(seen)
+
+
+def test_a_residual_adds_its_rate_to_the_controllers_and_nothing_when_zero():
+    controller = ReactivePolicy(SENSORS, **TUNED_3D_GAINS)
+    combine = ResidualAction(SENSORS, controller, 0.1)
+    obs = observations(2)
+    base = controller(obs)
+    np.testing.assert_allclose(combine(obs, np.zeros_like(base)), base, rtol=0, atol=1e-6)
+    residual = np.random.default_rng(1).uniform(-1, 1, base.shape)
+    rate = SENSORS.curvature_rate(combine(obs, residual).astype(float))
+    wanted = np.clip(SENSORS.curvature_rate(base.astype(float)) + 0.1 * residual, -SENSORS.max_curvature_rate,
+                     SENSORS.max_curvature_rate)
+    np.testing.assert_allclose(rate, wanted, rtol=1e-5, atol=1e-7)  # float32 actions
+    assert np.abs(rate - SENSORS.curvature_rate(base.astype(float))).max() > 0.05  # it does act
+    # a residual outside [−1, 1] is clipped, as an env clips an action
+    np.testing.assert_array_equal(combine(obs, 3 * np.ones_like(base)), combine(obs, np.ones_like(base)))
+    with pytest.raises(ValueError, match="ResidualAction.rate"):
+        ResidualAction(SENSORS, controller, 0.5)
+
+
+def test_the_residual_vec_env_gives_the_controller_each_envs_raw_observation_after_autoresets():
+    seen = []
+
+    def base(observation):  # records what it acts on, and closes
+        seen.append(np.array(observation))
+        return np.full((len(observation), 3), -0.5, dtype=np.float32)
+
+    inner = SoftGripperSB3VecEnv(num_envs=2, seed=3, max_episode_steps=3, observation="sensors")
+    env = ResidualVecEnv(inner, ResidualAction(GraspTask(observation="sensors"), base, 0.1))
+    with pytest.raises(RuntimeError, match="before reset"):
+        env.step_async(np.zeros((2, 3)))
+    returned = [env.reset()]
+    for _ in range(4):
+        env.step_async(np.zeros((2, 3), dtype=np.float32))
+        obs, _, done, _ = env.step_wait()
+        returned.append(obs)
+    assert len(seen) == 4
+    for given, obs in zip(seen, returned, strict=False):  # the observation the step before returned: after the
+        np.testing.assert_array_equal(given, obs)  # third step's autoreset, the next episode's first
+
+
+def test_a_residual_run_saves_its_controller_and_evaluates_as_the_two_together(tmp_path):
+    from agents import train_ppo
+    from agents.evaluate import load_ppo, ppo_policy
+
+    train_ppo.main(["--out", str(tmp_path), "--timesteps", "128", "--num-envs", "4", "--model", "planar",
+                    "--residual-to", "reactive_tuned", "--residual-rate", "0.05", "--eval-episodes", "0",
+                    "--validate-every", "0", "--checkpoint-every", "0"])
+    config = json.loads((tmp_path / "config.json").read_text())
+    assert config["residual"] == {"base": "reactive_tuned", "rate": 0.05}
+    assert config["policy"]["log_std_init"] == pytest.approx(np.log(0.2))
+    policy = load_ppo(tmp_path)
+    import pickle
+
+    from stable_baselines3 import PPO
+
+    with open(tmp_path / "vecnormalize.pkl", "rb") as f:
+        normalize = pickle.load(f)
+    alone = ppo_policy(PPO.load(tmp_path / "ppo_model.zip", device="cpu"), normalize)
+    obs = observations(2, seed=7)
+    controller = ReactivePolicy(SENSORS, **TUNED_3D_GAINS)
+    wanted = ResidualAction(SENSORS, controller, 0.05)(obs, alone(obs))
+    np.testing.assert_array_equal(policy(obs), wanted)
+    assert policy.observation == "sensors" and policy.trained_task["model"] == "planar"
+    assert not np.allclose(policy(obs), controller(obs), atol=1e-3)  # the residual is there
+
+
+def test_a_residual_policy_keeps_what_the_evaluation_reads():
+    def alone(observation):
+        return np.zeros((len(observation), 3))
+
+    alone.observation, alone.trained_task = "sensors", {"model": "3d"}
+    policy = residual_policy(alone, ResidualAction(SENSORS, ReactivePolicy(SENSORS), 0.1))
+    assert policy.observation == "sensors" and policy.trained_task == {"model": "3d"}
+    obs = observations(1)
+    np.testing.assert_allclose(policy(obs), ReactivePolicy(SENSORS)(obs), atol=1e-6)
