@@ -139,10 +139,10 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
     normalize.training = False
 
     act = ppo_policy(model, normalize, f"the policy in {model_dir}")
-    act.trained_task = trained_task(model_dir)
+    config = run_config(model_dir)
+    act.trained_task = config.get("task", {})
     act.observation = act.trained_task.get("observation", "full")
-    residual = json.loads((model_dir / "config.json").read_text()).get("residual") \
-        if (model_dir / "config.json").exists() else None
+    residual = config.get("residual")
     if residual:  # a correction to a scripted controller (agents.train_ppo --residual-to): run the two together
         from agents.residual import ResidualAction, residual_policy
 
@@ -151,10 +151,15 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
     return act
 
 
+def run_config(model_dir: Path) -> dict:
+    """A policy folder's config.json (what ``agents.train_ppo`` wrote), or {} without one."""
+    config_file = Path(model_dir) / "config.json"
+    return json.loads(config_file.read_text()) if config_file.exists() else {}
+
+
 def trained_task(model_dir: Path) -> dict:
     """The task a policy folder's config.json says it was trained on (its ``task``), or {} without one."""
-    config_file = Path(model_dir) / "config.json"
-    return json.loads(config_file.read_text()).get("task", {}) if config_file.exists() else {}
+    return run_config(model_dir).get("task", {})
 
 
 ACTION_MAP = ("control_dt", "max_curvature_rate", "action_exponent", "curvature_range", "touching_closing_rate",
