@@ -141,14 +141,20 @@ class ProgressAndCurve(BaseCallback):
     time leaves out the validations' own time."""
 
     def __init__(self, total: int, validate_every: int = 0, episodes: int = VALIDATION_EPISODES,
-                 num_threads: int = 1, residual: ResidualAction | None = None, **settings) -> None:
+                 num_threads: int = 1, residual: ResidualAction | None = None, curve_file: Path | None = None,
+                 **settings) -> None:
         super().__init__()
-        self.residual = residual
+        self.residual, self.curve_file = residual, curve_file
         self.total, self.validate_every, self.episodes, self.settings = total, validate_every, episodes, settings
         self.num_threads = min(num_threads, episodes)
         self.curve: list[tuple[int, float, float, float]] = []
         self.validation: list[dict] = []
         self.validating_s = 0.0
+
+    def record(self) -> dict:
+        """What curve.json holds: the training episodes (env steps, training wall time [s], return, success) and the
+        validations so far."""
+        return {"episodes": self.curve, "validation": self.validation}
 
     def training_wall(self) -> float:
         """Seconds spent training so far [s], without the validations."""
@@ -189,6 +195,8 @@ class ProgressAndCurve(BaseCallback):
         self.validation.append(point)
         self.logger.record("validation/success_rate", point["success_rate"])
         self.logger.record("validation/mean_peak_contact_force_N", point["mean_peak_contact_force_N"])
+        if self.curve_file is not None:  # a run stopped before its end keeps its curve so far
+            self.curve_file.write_text(json.dumps(self.record()))
         self.validating_s += time.perf_counter() - began
 
     def _on_training_end(self) -> None:
@@ -211,13 +219,15 @@ def provenance() -> dict:
     return {"package_version": soft_gripper_env.__version__, "git_commit": commit}
 
 
-def save_run(folder: Path, model: PPO, env: VecNormalize, config: dict) -> None:
+def save_run(folder: Path, model: PPO, env: VecNormalize, config: dict, curve: dict) -> None:
     """What ``agents.evaluate --policy FOLDER`` loads: the model (ppo_model.zip), its VecNormalize statistics
-    (vecnormalize.pkl) and the run's configuration (config.json)."""
+    (vecnormalize.pkl) and the run's configuration (config.json); and its learning curve so far (curve.json, what
+    ``agents.learning_curves`` reads)."""
     folder.mkdir(parents=True, exist_ok=True)
     model.save(folder / "ppo_model.zip")
     env.save(str(folder / "vecnormalize.pkl"))
     (folder / "config.json").write_text(json.dumps(config, indent=1))
+    (folder / "curve.json").write_text(json.dumps(curve))
 
 
 class RolloutCheckpoints(BaseCallback):
@@ -227,15 +237,15 @@ class RolloutCheckpoints(BaseCallback):
     (``--timesteps N``), which lets one run measure the shorter budgets it passes through. (SB3's
     CheckpointCallback saves in the middle of a rollout, a state that no shorter run ends in.)"""
 
-    def __init__(self, folder: Path, every: int, config: Callable[[], dict]) -> None:
+    def __init__(self, folder: Path, every: int, config: Callable[[], dict], curve: Callable[[], dict]) -> None:
         super().__init__()
-        self.folder, self.every, self.config = folder, every, config
+        self.folder, self.every, self.config, self.curve = folder, every, config, curve
         self.next = every
 
     def _on_rollout_start(self) -> None:
         if self.num_timesteps >= self.next:
             save_run(self.folder / f"steps_{self.num_timesteps}", self.model, self.model.get_env(),
-                     {**self.config(), "timesteps": self.num_timesteps})
+                     {**self.config(), "timesteps": self.num_timesteps}, self.curve())
             self.next = (self.num_timesteps // self.every + 1) * self.every
 
     def _on_step(self) -> bool:
@@ -317,7 +327,8 @@ def main(argv: list[str] | None = None) -> dict:
                 policy_kwargs=policy_settings, seed=args.seed, verbose=0, device="cpu",
                 tensorboard_log=str(args.out / "tensorboard"))
     progress = ProgressAndCurve(args.timesteps, args.validate_every, episodes=args.validation_episodes,
-                                num_threads=args.num_threads, residual=combine, **settings)
+                                num_threads=args.num_threads, residual=combine, curve_file=args.out / "curve.json",
+                                **settings)
     ramp = PressureWarningRamp(task.reward, args.final_pressure_weight, *args.pressure_ramp)
 
     trained_from = provenance()
@@ -335,12 +346,11 @@ def main(argv: list[str] | None = None) -> dict:
 
     callbacks = [progress, ramp]
     if args.checkpoint_every:
-        callbacks.append(RolloutCheckpoints(args.out / "checkpoints", args.checkpoint_every, config))
+        callbacks.append(RolloutCheckpoints(args.out / "checkpoints", args.checkpoint_every, config, progress.record))
     model.learn(args.timesteps, callback=callbacks, tb_log_name=f"ppo_seed{args.seed}")
     final = config()
     wall = final["training_wall_s"]
-    save_run(args.out, model, env, final)
-    (args.out / "curve.json").write_text(json.dumps({"episodes": progress.curve, "validation": progress.validation}))
+    save_run(args.out, model, env, final, progress.record())
 
     results = {"timesteps": args.timesteps, "seed": args.seed, "training_wall_s": wall}
     if args.eval_episodes:

@@ -76,7 +76,8 @@ def test_a_checkpoint_is_the_shorter_run_it_passes_through(tmp_path):
     from agents import train_ppo
 
     rollout = 4 * train_ppo.PPO_SETTINGS["n_steps"]  # env steps per rollout with 4 envs
-    common = ["--num-envs", "4", "--eval-episodes", "0", "--validate-every", "0", "--seed", "3", "--model", "planar"]
+    common = ["--num-envs", "4", "--eval-episodes", "0", "--validate-every", str(rollout), "--validation-episodes", "2",
+              "--seed", "3", "--model", "planar"]
     train_ppo.main(["--out", str(tmp_path / "long"), "--timesteps", str(3 * rollout),
                     "--checkpoint-every", str(2 * rollout - 24), *common])
     train_ppo.main(["--out", str(tmp_path / "short"), "--timesteps", str(2 * rollout), "--checkpoint-every", "0",
@@ -95,6 +96,13 @@ def test_a_checkpoint_is_the_shorter_run_it_passes_through(tmp_path):
     for config in configs:
         del config["training_wall_s"], config["validation_wall_s"]
     assert configs[0] == configs[1] and configs[0]["timesteps"] == 2 * rollout
+    curves = [json.loads((folder / "curve.json").read_text()) for folder in (checkpoint, short)]
+    for key, columns in (("episodes", (0, 2, 3)), ("validation", ("steps", "success_rate", "mean_return"))):
+        # the same episodes and validations (not the same wall times): the curve of the run stopped there
+        assert [[entry[c] for c in columns] for entry in curves[0][key]] == \
+            [[entry[c] for c in columns] for entry in curves[1][key]]
+    assert [point["steps"] for point in curves[0]["validation"]] == [rollout, 2 * rollout]
+    assert len(json.loads((tmp_path / "long" / "curve.json").read_text())["validation"]) == 3
     long_weights = PPO.load(tmp_path / "long" / "ppo_model.zip").policy.state_dict()
     assert not all(torch.equal(value, long_weights[name]) for name, value in weights[0].items())
 
