@@ -2,7 +2,8 @@
 floor that no step size removes.
 
     python -m benchmarks.outcome_convergence [--models 3d,planar] [--controllers reactive,ramp,pretrained]
-        [--dts 3d=0.01,...;planar=...] [--episodes 400] [--seed 3000000] [--workers 2] [--stop-after MINUTES]
+        [--dts 3d=0.01,...;planar=...] [--tolerance-floor] [--episodes 400] [--seed 3000000] [--workers 2]
+        [--stop-after MINUTES]
         [--runs out/outcome_convergence_runs] [--json out/outcome_convergence.json]
         [--plot out/outcome_convergence.png] [--time]
 
@@ -11,6 +12,9 @@ For each model, controller and Δt (halved from 10 ms: :data:`DEFAULT_DTS`) it r
 all other settings at the model's defaults. Each condition runs twice: as it is, and with the sphere's start moved by
 :data:`PERTURBATION_M` (1 nm along x, ``GraspTask.start_point``), a change far below any physical scale. How often
 the two runs' success labels agree is the **chaos floor** at that Δt: the agreement no step size can beat.
+``--tolerance-floor`` also runs the finest Δt with Newton's relative tolerance 1e-6 instead of the task's 1e-4: every
+Δt runs at 1e-4, so two runs cannot be asked to agree more often than the tolerance alone lets them. The floor a
+verdict uses is the lowest of the floors the study measured at the finest Δt.
 
 Per condition the study reports the success rate with its 95 % (Wilson) interval, the endings, and the peak-force
 and final-position distributions; against the finest Δt, seed by seed, how often the success labels agree and how far
@@ -58,7 +62,11 @@ CHANGES = {"perturbed": "the sphere's start moved by PERTURBATION_M along x",
            "tolerance 1e-6": "Newton's relative tolerance 1e-6 instead of the task's 1e-4",
            "friction settled": "the corrector settles friction within its whole budget (friction_passes None)"}
 """What a run can change from the model's defaults (other than Δt), by name. A run's variant is "base" (none of
-them) or the names of its changes joined by ", ": a chaos floor compares a variant with itself perturbed."""
+them) or the names of its changes joined by ", ": a chaos floor compares a variant with itself changed by one of
+:data:`FLOOR_CHANGES`."""
+FLOOR_CHANGES = {"perturbed": "start_moved_1nm", "tolerance 1e-6": "newton_tolerance_1e-6"}
+"""The changes far below any physical scale whose twin runs measure a chaos floor, and each floor's key in the
+summary: the sphere's start moved (at every Δt) and Newton's tolerance tightened (at the finest Δt)."""
 PIECE = 80
 """Seeds per piece: five batches of the evaluation's 16 envs, about a minute of one core in 3-D at 2.5 ms."""
 SIGNIFICANCE = 0.05
@@ -172,13 +180,19 @@ def seed_ranges(seed: int, episodes: int) -> list[tuple[int, int]]:
 
 
 def plan(models: list[str], controllers: list[str], dts: dict[str, tuple[float, ...]], episodes: int, seed: int,
-         variant: str = "base", floor: bool = True) -> list[Piece]:
+         variant: str = "base", floor: bool = True, tolerance_floor: bool = False) -> list[Piece]:
     """Every piece of the study of ``variant``, in the order they run: by controller, model, Δt from coarse to fine
-    (the cheap first), the variant before its perturbed twin (without ``floor``, none)."""
-    variants = (variant, with_change(variant, "perturbed")) if floor else (variant,)
+    (the cheap first), the variant before its perturbed twin (without ``floor``, none) and, at the finest Δt with
+    ``tolerance_floor``, its twin at Newton's tolerance 1e-6."""
+    def variants(model: str, dt: float) -> list[str]:
+        twins = [with_change(variant, "perturbed")] if floor else []
+        if tolerance_floor and dt == min(dts[model]):
+            twins.append(with_change(variant, "tolerance 1e-6"))
+        return [variant, *twins]
+
     return [Piece(model, controller, dt, run, first, count)
             for controller in controllers for model in models for dt in sorted(dts[model], reverse=True)
-            for run in variants for first, count in seed_ranges(seed, episodes)]
+            for run in variants(model, dt) for first, count in seed_ranges(seed, episodes)]
 
 
 def kept_piece(runs: Path, piece: Piece, fingerprint: str) -> dict | None:
@@ -366,8 +380,8 @@ def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[st
                 continue
             reference_dt = there[0]
             reference = joined[(model, controller, reference_dt, variant, "cpu")]
-            chaos = agreement(reference, joined[(model, controller, reference_dt, perturbed, "cpu")])[
-                "label_agreement"] if floor else None
+            floors = reference_floors(joined, model, controller, reference_dt, variant)
+            chaos = lowest_floor(floors)
             rows = {}
             for dt in there:
                 run = joined[(model, controller, dt, variant, "cpu")]
@@ -389,10 +403,32 @@ def summarize(joined: dict[tuple, dict], models: list[str], controllers: list[st
             order = gap_order(rows)
             if order is not None:
                 print(f"  ({model}, {controller}: the median gap to the finest Δt falls as Δt^{order:.2f})")
+            if chaos is not None:
+                print(f"  ({model}, {controller}: the floor at {1e3 * reference_dt:g} ms is {chaos:.3f}, the lowest of "
+                      + ", ".join(f"{name} {value:.3f}" for name, value in floors.items() if value is not None) + ")")
             summary["models"][model][controller] = {
                 "reference_dt_s": reference_dt, "finest_dt_s": finest, "dts": rows, "median_gap_order": order,
+                "floors": floors, "floor": chaos,
                 "largest_converged_dt_s": largest_converged(rows, reference_dt) if passing else None}
     return summary
+
+
+def reference_floors(joined: dict[tuple, dict], model: str, controller: str, reference_dt: float,
+                     variant: str) -> dict[str, float | None]:
+    """The chaos floors at the reference Δt, by :data:`FLOOR_CHANGES`' keys: the reference's label agreement with
+    each twin that ran (None where it did not)."""
+    reference = joined[(model, controller, reference_dt, variant, "cpu")]
+    floors = {}
+    for change, key in FLOOR_CHANGES.items():
+        twin = joined.get((model, controller, reference_dt, with_change(variant, change), "cpu"))
+        floors[key] = None if twin is None else agreement(reference, twin)["label_agreement"]
+    return floors
+
+
+def lowest_floor(floors: dict[str, float | None]) -> float | None:
+    """The floor a verdict uses: the lowest that was measured (None if none was)."""
+    measured = [value for value in floors.values() if value is not None]
+    return min(measured) if measured else None
 
 
 def complete_dts(joined: dict[tuple, dict], model: str, controller: str, dts: dict[str, tuple[float, ...]],
@@ -416,7 +452,6 @@ def planar_against_3d(joined: dict[tuple, dict], controllers: list[str], dts: di
     """Whether the planar model stands in for 3-D: each planar Δt's outcomes against the 3-D model's at its finest
     Δt on the same seeds, by the same tests (:func:`converged`) and against 3-D's chaos floor; prints its table.
     Empty unless both models ran."""
-    perturbed = with_change(variant, "perturbed")
     compared = {}
     for controller in controllers:
         finest = complete_dts(joined, "3d", controller, dts, variant, floor)
@@ -424,8 +459,7 @@ def planar_against_3d(joined: dict[tuple, dict], controllers: list[str], dts: di
         if not finest or not planar:
             continue
         reference = joined[("3d", controller, finest[0], variant, "cpu")]
-        chaos = agreement(reference, joined[("3d", controller, finest[0], perturbed, "cpu")])[
-            "label_agreement"] if floor else None
+        chaos = lowest_floor(reference_floors(joined, "3d", controller, finest[0], variant))
         reference_text = success_text(describe(reference))
         print(f"\n| planar Δt [ms] ({controller}) | success | 3-D at {1e3 * finest[0]:g} ms | labels agree | "
               "median gap [mm] | success p | endings p | peak-force KS p | final-distance KS p | a stand-in |\n"
@@ -522,6 +556,13 @@ def plot(summary: dict, path: Path) -> None:
                 if all(rows[k]["chaos_floor"] is not None for k in rows):
                     axis.plot(dt, [rows[k]["chaos_floor"][key] * scale for k in rows], color=colour,
                               linestyle="--", marker="x", label=f"{controller}: chaos floor (start moved 1 nm)")
+            tolerance = (study.get("floors") or {}).get(FLOOR_CHANGES["tolerance 1e-6"])
+            if tolerance is not None:
+                agree.scatter([1e3 * study["reference_dt_s"]], [tolerance], color=colour, marker="P", s=60,
+                              label=f"{controller}: floor by Newton's tolerance 1e-6")
+            if study.get("floor") is not None:
+                agree.axhline(study["floor"] - FLOOR_MARGIN, color=colour, linestyle=":", linewidth=1,
+                              label=f"{controller}: passes above (floor − {FLOOR_MARGIN:g})")
         success.set(ylabel="success rate (95 % interval)", title=f"{model}: success against Δt")
         agree.set(ylabel="share of seeds with the same label", title=f"{model}: labels against the finest Δt")
         gap.set(ylabel="median gap of the sphere's final place [mm]", yscale="log",
@@ -598,6 +639,9 @@ def main(argv: list[str] | None = None) -> dict:
                              "does to convergence; the runs are kept apart from the defaults' own")
     parser.add_argument("--no-floor", action="store_true",
                         help="run no perturbed twins (half the cost; no chaos floor, so no verdict)")
+    parser.add_argument("--tolerance-floor", action="store_true",
+                        help="also run the finest Δt at Newton's tolerance 1e-6: a second floor; the verdicts use "
+                             "the lower")
     parser.add_argument("--time", action="store_true", help="also time each model and Δt against Ant-v5")
     args = parser.parse_args(argv)
     models = study_models(parser, args)
@@ -609,7 +653,10 @@ def main(argv: list[str] | None = None) -> dict:
     except ValueError as error:
         parser.error(str(error))
     variant = ", ".join(args.change) or "base"
-    pieces = plan(models, controllers, dts, args.episodes, args.seed, variant, not args.no_floor)
+    if args.tolerance_floor and "tolerance 1e-6" in args.change:
+        parser.error("--tolerance-floor: the variant already runs at Newton's tolerance 1e-6 (--change)")
+    pieces = plan(models, controllers, dts, args.episodes, args.seed, variant, not args.no_floor,
+                  args.tolerance_floor)
     results = run_study(pieces, args.runs, args.workers, 60 * args.stop_after)
     joined = conditions(results, pieces)
     summary = summarize(joined, models, controllers, dts, args.episodes, args.seed, variant, not args.no_floor)

@@ -247,3 +247,43 @@ def test_the_planar_model_is_compared_with_3d_at_its_finest_step(capsys):
     assert not compared["dts"]["0.004"]["against_3d"]["passes"]
     assert "| 4 | " in capsys.readouterr().out
     assert study.planar_against_3d({k: v for k, v in joined.items() if k[0] == "planar"}, ["reactive"], dts) == {}
+
+
+def test_a_tolerance_floor_runs_at_the_finest_step_only_and_the_verdict_takes_the_lower_floor(capsys):
+    """Newton's tolerance twin runs at the finest Δt alone; where it flips more labels than the 1 nm shift, the
+    verdicts are judged against it: a coarse run 8 points off passes a floor of 0.90 and fails one of 1.00."""
+    dts = {"3d": (0.002, 0.001)}
+    pieces = study.plan(["3d"], ["reactive"], dts, 4, 0, floor=True, tolerance_floor=True)
+    twins = {(p.dt, p.variant) for p in pieces}
+    assert twins == {(0.002, "base"), (0.002, "perturbed"), (0.001, "base"), (0.001, "perturbed"),
+                     (0.001, "tolerance 1e-6")}
+    rng = np.random.default_rng(2)
+    labels = rng.random(400) < 0.8
+
+    def flipped(count: int) -> dict:
+        """``count`` labels flipped, half of them successes, so that the success rate stays."""
+        changed = labels.copy()
+        for value in (True, False):
+            which = np.flatnonzero(labels == value)[:count // 2]
+            changed[which] = not value
+        return run_of(changed, peaks=finest["peak_forces_N"], offsets=finest["final_offsets_m"])
+
+    finest = run_of(labels)
+    joined = {("3d", "reactive", 0.001, "base", "cpu"): finest, ("3d", "reactive", 0.001, "perturbed", "cpu"): finest,
+              ("3d", "reactive", 0.002, "base", "cpu"): flipped(32), ("3d", "reactive", 0.002, "perturbed", "cpu"):
+              flipped(32)}
+    alone = study.summarize(joined, ["3d"], ["reactive"], dts, 400, 0)["models"]["3d"]["reactive"]
+    assert alone["floors"] == {"start_moved_1nm": 1.0, "newton_tolerance_1e-6": None} and alone["floor"] == 1.0
+    assert not alone["dts"]["0.002"]["against_reference"]["passes"]
+    joined[("3d", "reactive", 0.001, "tolerance 1e-6", "cpu")] = flipped(40)
+    both = study.summarize(joined, ["3d"], ["reactive"], dts, 400, 0)["models"]["3d"]["reactive"]
+    assert both["floors"]["newton_tolerance_1e-6"] == pytest.approx(0.9) and both["floor"] == pytest.approx(0.9)
+    assert both["dts"]["0.002"]["against_reference"]["label_agreement"] == pytest.approx(0.92)
+    assert both["dts"]["0.002"]["against_reference"]["passes"]
+    assert "the lowest of start_moved_1nm 1.000, newton_tolerance_1e-6 0.900" in capsys.readouterr().out
+
+
+def test_a_tolerance_floor_of_a_variant_at_that_tolerance_is_refused(capsys):
+    with pytest.raises(SystemExit):
+        study.main(["--change", "tolerance 1e-6", "--tolerance-floor"])
+    assert "--tolerance-floor" in capsys.readouterr().err
