@@ -147,7 +147,8 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
         from agents.residual import ResidualAction, residual_policy
 
         task = GraspTask(**{name: act.trained_task[name] for name in ("model", "observation", *REFLEXES)})
-        act = residual_policy(act, ResidualAction(task, make_policy(residual["base"], task, 0), residual["rate"]))
+        act = residual_policy(act, ResidualAction(task, make_policy(residual["base"], task, 0), residual["rate"],
+                                                  residual.get("gust_hold", False), residual.get("press_limit")))
     return act
 
 

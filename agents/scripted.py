@@ -63,6 +63,13 @@ PPO policies' closing reflexes, on tuning seeds 5000–5199 only (16 settings of
 trained in 3-D."""
 
 
+def gust_window(task: GraspTask) -> tuple[float, float]:
+    """The episode fractions in which a gust may blow (dimensionless): from a little (0.05) before the task's
+    earliest gust start to its latest gust's end, read by a controller from the observation's episode fraction."""
+    return (task.gust_start[0] / task.episode_duration - 0.05,
+            (task.gust_start[1] + task.gust_duration) / task.episode_duration)
+
+
 class ReactivePolicy:
     """Closing with force feedback, finger by finger, to a grip that respects the specimen's fragility limit.
 
@@ -96,8 +103,7 @@ class ReactivePolicy:
         check_range("ReactivePolicy", "slowest", slowest, "(dimensionless)", 0.0, 1.0, high_inclusive=True)
         check_range("ReactivePolicy", "gust_grip", gust_grip, "(dimensionless)", 0.0, 1.0)
         self.grip, self.gust_grip, self.gain, self.slow_gap, self.slowest = grip, gust_grip, gain, slow_gap, slowest
-        window = np.array([self.task.gust_start[0], self.task.gust_start[1] + self.task.gust_duration])
-        self._gust_window = window / self.task.episode_duration  # episode fractions in which a gust may blow
+        self._gust_window = gust_window(self.task)
         self._press, self._approach = press_rate, approach_rate
         layout = observation_slices(self.task)
         self._forces, self._touching, self._limit = layout["finger_forces"], layout["touching"], layout["fragile_force"]
@@ -108,7 +114,7 @@ class ReactivePolicy:
         batch = observation.reshape(-1, observation.shape[-1]).astype(float)
         force, touching = batch[:, self._forces], batch[:, self._touching] > 0.5
         fraction = batch[:, self._fraction]
-        gusty = (fraction >= self._gust_window[0] - 0.05) & (fraction <= self._gust_window[1])
+        gusty = (fraction >= self._gust_window[0]) & (fraction <= self._gust_window[1])
         target = np.maximum(np.where(gusty, self.gust_grip, self.grip) * batch[:, self._limit], 1e-9)  # [N]
         regulate = np.clip(-self.gain * self.task.max_curvature_rate * (target - force) / target, -self._press,
                            self._press)  # [1/s]

@@ -4,7 +4,7 @@
         [--model 3d] [--observation sensors] [--validate-every 50000] [--eval-episodes 200]
         [--touching-closing-rate RATE] [--approach-slowing-gap M] [--final-pressure-weight 12]
         [--pressure-ramp 200000 400000] [--checkpoint-every 100000] [--residual-to reactive_tuned]
-        [--residual-rate 0.1]
+        [--residual-rate 0.1] [--residual-gust-hold] [--residual-press-limit FRACTION]
 
 By default PPO trains in the env's default rod model (3-D; ``--model planar`` costs about a third per step) on the
 sensors' observation (``GraspTask.observation``), whose readings mean the same in both models, so a policy trained
@@ -23,6 +23,9 @@ scripted controllers on held-out seeds (evaluation.json; seeds from 1,000,000, w
 With ``--residual-to CONTROLLER`` PPO learns a correction to a scripted controller instead (agents/residual.py):
 its action adds up to ``--residual-rate`` [1/s] to the controller's rate, finger by finger, and the folder's
 config.json records the controller, so ``agents.evaluate --policy DIR`` runs the two together.
+``--residual-gust-hold`` forbids the correction to open a finger while a gust may blow, and
+``--residual-press-limit F`` to close one that presses above F times the specimen's fragility limit
+(:class:`agents.residual.ResidualAction`'s guards; config.json records them too).
 """
 
 from __future__ import annotations
@@ -280,6 +283,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--residual-rate", type=float, default=RESIDUAL_RATE, metavar="RATE",
                         help=f"the largest correction added to the controller's rate [1/s] (default {RESIDUAL_RATE:g};"
                              " with --residual-to)")
+    parser.add_argument("--residual-gust-hold", action="store_true",
+                        help="the correction may not open a finger while a gust may blow (with --residual-to)")
+    parser.add_argument("--residual-press-limit", type=float, default=None, metavar="FRACTION",
+                        help="the correction may not close a finger pressing above this fraction of the specimen's "
+                             "fragility limit, in (0, 1] (with --residual-to; default: no limit)")
     parser.add_argument("--eval-episodes", type=int, default=200, help="held-out episodes at the end (0: none)")
     parser.add_argument("--validate-every", type=int, default=50_000,
                         help="env steps between measures of the deterministic policy on validation seeds, the "
@@ -313,14 +321,20 @@ def main(argv: list[str] | None = None) -> dict:
     if not 0.0 < args.residual_rate <= task.max_curvature_rate:
         parser.error(f"--residual-rate = {args.residual_rate} is outside (0, {task.max_curvature_rate:g}] 1/s (the "
                      f"fastest closing)")
+    if not args.residual_to and (args.residual_gust_hold or args.residual_press_limit is not None):
+        parser.error("--residual-gust-hold and --residual-press-limit guard a correction: they need --residual-to")
+    if args.residual_press_limit is not None and not 0.0 < args.residual_press_limit <= 1.0:
+        parser.error(f"--residual-press-limit = {args.residual_press_limit} is outside (0, 1] (a fraction of the "
+                     f"fragility limit)")
     args.out.mkdir(parents=True, exist_ok=True)
 
     venv = SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads, **settings)
     residual, combine = None, None
     if args.residual_to:
-        combine = ResidualAction(task, make_policy(args.residual_to, task, args.seed), args.residual_rate)
+        combine = ResidualAction(task, make_policy(args.residual_to, task, args.seed), args.residual_rate,
+                                 args.residual_gust_hold, args.residual_press_limit)
         venv = ResidualVecEnv(venv, combine)
-        residual = {"base": args.residual_to, "rate": args.residual_rate}
+        residual = {"base": args.residual_to, **combine.settings()}
     env = VecNormalize(VecMonitor(venv, info_keywords=("is_success",)), gamma=PPO_SETTINGS["gamma"])
     policy_settings = RESIDUAL_POLICY_SETTINGS if residual else POLICY_SETTINGS
     model = PPO("MlpPolicy", env, batch_size=min(1024, PPO_SETTINGS["n_steps"] * args.num_envs), **PPO_SETTINGS,

@@ -73,7 +73,7 @@ def test_a_residual_run_saves_its_controller_and_evaluates_as_the_two_together(t
                     "--residual-to", "reactive_tuned", "--residual-rate", "0.05", "--eval-episodes", "0",
                     "--validate-every", "0", "--checkpoint-every", "0"])
     config = json.loads((tmp_path / "config.json").read_text())
-    assert config["residual"] == {"base": "reactive_tuned", "rate": 0.05}
+    assert config["residual"] == {"base": "reactive_tuned", "rate": 0.05, "gust_hold": False, "press_limit": None}
     assert config["policy"]["log_std_init"] == pytest.approx(np.log(0.2))
     policy = load_ppo(tmp_path)
     import pickle
@@ -100,3 +100,36 @@ def test_a_residual_policy_keeps_what_the_evaluation_reads():
     assert policy.observation == "sensors" and policy.trained_task == {"model": "3d"}
     obs = observations(1)
     np.testing.assert_allclose(policy(obs), ReactivePolicy(SENSORS)(obs), atol=1e-6)
+
+
+def test_the_guards_stop_a_correction_opening_in_the_gust_window_and_closing_near_the_limit():
+    from agents.scripted import gust_window
+    from soft_gripper_env.env import observation_slices
+
+    controller = ReactivePolicy(SENSORS, **TUNED_3D_GAINS)
+    layout = observation_slices(SENSORS)
+    obs = observations(2)
+    free, guarded = ResidualAction(SENSORS, controller, 0.1), ResidualAction(SENSORS, controller, 0.1, True, 0.5)
+    rng = np.random.default_rng(4)
+    obs = np.repeat(obs, 2, axis=0)
+    low, high = gust_window(SENSORS)
+    obs[:, layout["episode_fraction"]] = rng.uniform(0.0, 1.0, (len(obs), 1))  # in and out of the window
+    obs[:, layout["fragile_force"]] = 2.0
+    obs[:, layout["finger_forces"]] = rng.uniform(0.0, 2.0, (len(obs), 3))  # below and above half the limit
+    residual = rng.uniform(-1.0, 1.0, (len(obs), 3))
+
+    def correction(combine):
+        return SENSORS.curvature_rate(combine(obs, residual).astype(float)) \
+            - SENSORS.curvature_rate(controller(obs).astype(float))
+
+    fraction = obs[:, layout["episode_fraction"]]
+    gusty = np.broadcast_to((fraction >= low) & (fraction <= high), residual.shape)
+    pressing = obs[:, layout["finger_forces"]] > 1.0
+    unguarded, kept = correction(free), correction(guarded)
+    assert (gusty & (residual > 0)).any() and (pressing & (residual < 0)).any() and (~gusty & ~pressing).any()
+    assert np.all(kept[gusty] <= 1e-6)  # no opening while a gust may blow
+    assert np.all(kept[pressing] >= -1e-6)  # no closing above half the limit
+    np.testing.assert_allclose(kept[~gusty & ~pressing], unguarded[~gusty & ~pressing], atol=1e-6)
+    assert np.abs(unguarded[gusty & (residual > 0)]).max() > 0.01  # the guard is what removed it
+    with pytest.raises(ValueError, match="ResidualAction.press_limit"):
+        ResidualAction(SENSORS, controller, 0.1, press_limit=1.5)
