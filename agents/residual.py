@@ -15,6 +15,8 @@ from collections.abc import Callable
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
+from agents.scripted import gust_may_blow, gust_window
+from soft_gripper_env.env import observation_slices
 from soft_gripper_env.grasp_task import GraspTask
 from soft_gripper_env.physics import check_range
 
@@ -42,9 +44,6 @@ class ResidualAction:
         self.task, self.base, self.rate = task, base, rate
         self.gust_hold, self.press_limit = bool(gust_hold), press_limit
         if self.gust_hold or press_limit is not None:
-            from agents.scripted import gust_window
-            from soft_gripper_env.env import observation_slices
-
             layout = observation_slices(task)
             self._forces, self._limit = layout["finger_forces"], layout["fragile_force"]
             self._fraction, self._window = layout["episode_fraction"], gust_window(task)
@@ -60,8 +59,7 @@ class ResidualAction:
     def _guarded(self, observation: np.ndarray, correction: np.ndarray) -> np.ndarray:
         """``correction`` [1/s] with the guards applied, for raw observations of the same leading shape."""
         if self.gust_hold:
-            fraction = observation[..., self._fraction]
-            gusty = (fraction >= self._window[0]) & (fraction <= self._window[1])
+            gusty = gust_may_blow(self._window, observation[..., self._fraction])
             correction = np.where(gusty, np.minimum(correction, 0.0), correction)
         if self.press_limit is not None:
             pressing = observation[..., self._forces] > self.press_limit * observation[..., self._limit]

@@ -70,6 +70,11 @@ def gust_window(task: GraspTask) -> tuple[float, float]:
             (task.gust_start[1] + task.gust_duration) / task.episode_duration)
 
 
+def gust_may_blow(window: tuple[float, float], fraction: np.ndarray) -> np.ndarray:
+    """Where the episode ``fraction`` lies within ``window`` (:func:`gust_window`), elementwise."""
+    return (fraction >= window[0]) & (fraction <= window[1])
+
+
 class ReactivePolicy:
     """Closing with force feedback, finger by finger, to a grip that respects the specimen's fragility limit.
 
@@ -114,7 +119,7 @@ class ReactivePolicy:
         batch = observation.reshape(-1, observation.shape[-1]).astype(float)
         force, touching = batch[:, self._forces], batch[:, self._touching] > 0.5
         fraction = batch[:, self._fraction]
-        gusty = (fraction >= self._gust_window[0]) & (fraction <= self._gust_window[1])
+        gusty = gust_may_blow(self._gust_window, fraction)
         target = np.maximum(np.where(gusty, self.gust_grip, self.grip) * batch[:, self._limit], 1e-9)  # [N]
         regulate = np.clip(-self.gain * self.task.max_curvature_rate * (target - force) / target, -self._press,
                            self._press)  # [1/s]
