@@ -20,11 +20,11 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from ..scene.discretization import Discretization
 from ..scene.fluid import Fluid
 from ..scene.forces import ForceModel, ForceTerms
+from .compiled import kernel
 from .finger_contact import FingerContact, any_near, finger_contact_rod, finger_scratch
 from .forces import added_mass, linear_damping, morison_drag, rod_water_velocity
 from .rod_3d import elastic_scratch, rod3d_elastic_rod
@@ -72,7 +72,7 @@ FINGERS_FIELD = RodArrays._fields.index("fingers")
 """Where the finger contact's constants are among the fields of :class:`RodArrays` (for its plain tuple)."""
 
 
-@njit(cache=True, nogil=True)
+@kernel(python=True)
 def named_rods(rods):
     """:class:`RodArrays` from its fields as plain tuples (:func:`~..solvers.newton.plain`), named again, the
     finger contact's too."""
@@ -98,7 +98,7 @@ class StepInputs(NamedTuple):
     int (:func:`~.finger_contact.find_near_fingers`); empty without finger contact."""
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def external_forces_rod(positions, start_positions, velocities, accelerations, water, terms, velocity_derivative,
                         acceleration_derivative, stride, force, band):
     """Adds the force terms' force [N] to one rod's ``force`` (N, ≥D) and their negated Jacobian to its ``band``.
@@ -118,7 +118,7 @@ def external_forces_rod(positions, start_positions, velocities, accelerations, w
         added_mass(start_positions, accelerations, edge_added_mass, acceleration_derivative, stride, force, band)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def external_forces(positions, start_positions, velocities, accelerations, water, terms, velocity_derivative,
                     acceleration_derivative, stride, force, band):
     """:func:`external_forces_rod` for every rod: arrays (R, N, D), ``water`` (R, D), ``band`` (R, n, kd+1)."""
@@ -127,7 +127,7 @@ def external_forces(positions, start_positions, velocities, accelerations, water
                             velocity_derivative, acceleration_derivative, stride, force[r], band[r])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def assemble_rod(r, q, step, rods, terms, hessian, force, band, strained, velocity, acceleration, elastic, fingers):
     """Overwrites ``force`` (N, S) with rod r's total force [N] at coordinates ``q`` (R, N, S) of the backward-Euler
     step ``step`` (:class:`StepInputs`), and ``band`` (n, kd+1) with −∂f/∂q (when ``hessian``). Work arrays, passed
@@ -179,7 +179,7 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, strained, veloci
     return energy
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def assemble(q, step, rods, terms, hessian, force, band):
     """Every rod's force (R, N, S) [N] and −∂f/∂q (R, n, kd+1), written into ``force`` and ``band``."""
     n_nodes = q.shape[1]

@@ -41,8 +41,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from .compiled import kernel
 from .contact import STICK_SPEED
 from .local import local_array
 
@@ -119,7 +119,7 @@ class BodyMotion(NamedTuple):
     """The current's mean acceleration over the step at each body [m/s²], (B, 3)."""
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _translational_mass(b, body, orientation_old, mass):
     """Mass plus added mass of body b in the world frame, m·I + R_old·A·R_oldᵀ [kg], into ``mass`` (3, 3)."""
     added = body.added_mass
@@ -132,7 +132,7 @@ def _translational_mass(b, body, orientation_old, mass):
             mass[i, j] = total
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _palm_contact(b, body, c, velocity, omega, orientation, vertical_mass, dt, load, matrix):
     """Adds the palm's force and torque on body b (6,) [N, N·m] to ``load``, and their negated derivatives by the
     body's unknowns over the step (centre and rotation, (6, 6)) to ``matrix``.
@@ -214,7 +214,7 @@ def _palm_contact(b, body, c, velocity, omega, orientation, vertical_mass, dt, l
         matrix[5, m] -= arm[0] * d_force[1, m] - arm[1] * d_force[0, m]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def palm_reactions(body, c, c_old, theta, orientation, orientation_old, dt, reaction):
     """Writes the force of every body on the palm (B, 3) [N] into ``reaction``, for bodies moved from ``c_old`` to
     ``c`` and turned by ``theta`` (B, 3) over the step; ``body`` holds the fields of :class:`BodyArrays` as a plain
@@ -236,7 +236,7 @@ def palm_reactions(body, c, c_old, theta, orientation, orientation_old, dt, reac
             reaction[b, i] = -load[i]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def body_residual(b, body, motion, orientation, dt, residual, matrix):
     """Body b's own residual (6,) (inertia minus external loads) into ``residual``, and the diagonal blocks of its
     Jacobian, translation and rotation, into ``matrix`` (6, 6). ``body`` is :class:`BodyArrays`, ``motion``
@@ -311,7 +311,7 @@ def body_residual(b, body, motion, orientation, dt, residual, matrix):
     _water_torque(b, body, theta[b], axis, dt, residual, matrix)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _water_torque(b, body, theta, axis, dt, residual, matrix):
     """Adds the water's resistance to the body turning at ω = θ/Δt to its rotational residual (the torque's negation)
     and Jacobian by θ: −(8π·η·R³ + s·√|ω|)·ω on the sphere (or end caps), and −t·|ω⊥|·ω⊥ on a capsule's cylinder
@@ -341,7 +341,7 @@ def _water_torque(b, body, theta, axis, dt, residual, matrix):
             matrix[3 + i, 3 + j] += d_torque / dt
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _rotation_exp(theta, out):
     """exp([θ]×) of one rotation vector (3,) [rad] into ``out`` (3, 3), by Rodrigues' formula."""
     angle = math.sqrt(theta[0] ** 2 + theta[1] ** 2 + theta[2] ** 2)
@@ -361,7 +361,7 @@ def _rotation_exp(theta, out):
             out[i, j] = (1.0 if i == j else 0.0) + a * k[i, j] + b * kk
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def turned(theta, orientation_old, rotation, out):
     """The body's orientation after turning by ``theta`` (3,) [rad] over the step, exp([θ]×)·R_old, into ``out``
     (3, 3); ``rotation`` (3, 3) is scratch."""
@@ -372,7 +372,7 @@ def turned(theta, orientation_old, rotation, out):
                 + rotation[i, 2] * orientation_old[2, j]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def admissible_rotation(basis, theta):
     """Projects one gripper's rotation over the step ``theta`` (3,) [rad], in place, onto the rotations its
     ``basis`` (6, 6; orthonormal columns) allows. Newton moves the body only along the basis, so a rotation it
@@ -391,7 +391,7 @@ def admissible_rotation(basis, theta):
         theta[i] = projected[i]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def planar_body_basis(held, plane_normals, basis):
     """The motions a free body held by planar fingers may make, into ``basis`` (B, 6, 6), which it returns, padded
     with zero columns: any
@@ -425,7 +425,7 @@ def planar_body_basis(held, plane_normals, basis):
     return basis
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finger_radius, finger_directions,
                        plane_normals, starts, ends, radii):
     """Each gripper's free body (centre ``c`` (B, 3), ``orientation`` (B, 3, 3), segment ends in its frame (B, 3)

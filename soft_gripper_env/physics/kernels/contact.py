@@ -19,9 +19,9 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from ..scene.objects import GraspedObject
+from .compiled import kernel
 from .linalg import symmetric_band_entry
 from .local import local_array
 
@@ -69,7 +69,7 @@ def object_in_rod_frames(obj: GraspedObject, finger_directions: np.ndarray, fing
     return centers, centers, radius
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def contact_reactions(q, residual, held, friction, starts, ends, finger_directions, reaction, normal):
     """The object's force on every node at a step's solution, as the step reports it: the unbalanced force of a
     held node's equation of motion (its Newton ``residual`` (R, n) where ``held`` (R, N)) plus its ``friction``
@@ -112,7 +112,7 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
                     normal[r, i] += local[k] * unit[k]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def within_reach(starts, ends, radii, length, reach):
     """Which rods can touch an object given as they see it (segment ends (R, D), touching distances (R, N)), into
     ``reach`` (R,) bool, which it returns: the object must exist in the rod's frame (some distance > 0) and its
@@ -129,7 +129,7 @@ def within_reach(starts, ends, radii, length, reach):
     return reach
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(python=True, inline=True)
 def distance_to_segment(point, start, end, nearest):
     """Distance from ``point`` to the segment start–end; writes the segment's nearest point into ``nearest``."""
     dim = point.size
@@ -146,7 +146,7 @@ def distance_to_segment(point, start, end, nearest):
     return math.sqrt(distance2)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def find_penetrations(positions, old_positions, view, held, first_free_node, tolerance, new_hold, hold_at, found):
     """Marks in ``new_hold`` (R, N) every free node from ``first_free_node`` on of a searched rod that lies inside its
     object (``view``, :class:`ObjectView`: for node i of rod r, the points within ``radii[r, i]`` of the segment
@@ -199,7 +199,7 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
     return found
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def outward_normal(point, start, end, nearest, normal):
     """The unit direction from the segment start–end to ``point`` (D,), into ``normal`` (D,), with the segment's
     nearest point in ``nearest`` (D,); returns False (and leaves ``normal``) where the point lies on the segment
@@ -213,7 +213,7 @@ def outward_normal(point, start, end, nearest, normal):
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def onto_surface(point, start, end, radius, normal):
     """Moves ``point`` (D,) in place along the normal to the surface at ``radius`` from the segment start–end, and
     writes that outward unit normal into ``normal`` (D,); returns False (and leaves both) where the point lies on
@@ -226,7 +226,7 @@ def onto_surface(point, start, end, radius, normal):
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def along_surface(friction, normal, out):
     """The friction force ``friction`` (D,) turned into the tangent plane of ``normal`` (D,), keeping its size: the
     force a sliding node's friction exerts at its current point, whatever the surface's normal was when it was set."""
@@ -244,7 +244,7 @@ def along_surface(friction, normal, out):
         out[d] *= scale
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def tangent_basis(normal, basis):
     """An orthonormal basis (D, D) whose first column is the unit ``normal`` (D,) and whose others span its tangent
     plane, into ``basis``; the same normal always gives the same basis."""
@@ -273,7 +273,7 @@ def tangent_basis(normal, basis):
     basis[2, 2] = normal[0] * basis[1, 1] - normal[1] * basis[0, 1]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def rotate_node(band, first, basis):
     """Expresses one node's D DOFs ``first`` … ``first`` + D − 1 of a rod's symmetric band (n, kd+1) in the
     ``basis`` (D, D) (x = Q·ξ): A ← Tᵀ·A·T with T the identity but for Q on that node's block, in place."""

@@ -41,9 +41,9 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from ..scene.discretization import Discretization
+from .compiled import kernel
 from .contact import STICK_SPEED, distance_to_segment
 
 SEARCH_WINDOW = 2
@@ -106,7 +106,7 @@ N_SCRATCH_POINTS = 10
 """3-vectors in the finger contact's work buffer (:func:`finger_views`)."""
 
 
-@njit(cache=True, nogil=True)
+@kernel(python=True)
 def finger_scratch_size(n_fingers, n_nodes):
     """Elements of the work buffer of the contact between ``n_fingers`` fingers of ``n_nodes`` nodes (0 for 0
     fingers: a gripper without finger contact)."""
@@ -116,14 +116,14 @@ def finger_scratch_size(n_fingers, n_nodes):
     return 3 * N_SCRATCH_POINTS + 3 * n_nodes + 9 + 4 * n_fingers * n_nodes + 5 * n_fingers * n_chunks
 
 
-@njit(cache=True, nogil=True)
+@kernel(python=True)
 def finger_scratch(n_fingers, n_nodes):
     """The finger contact's work buffer (:func:`finger_views`), passed in so that the search and the forces allocate
     nothing (a GPU thread has no heap to allocate from); empty without finger contact (``n_fingers`` 0)."""
     return np.empty(finger_scratch_size(n_fingers, n_nodes))
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline=True)
 def finger_views(buffer, n_fingers, n_nodes):
     """The work arrays in ``buffer`` (:func:`finger_scratch`): 3-vectors, one a row (:data:`N_SCRATCH_POINTS`, 3),
     another finger's world nodes at the start of the step (N, 3), a 3×3 matrix, every finger's world nodes at the
@@ -149,7 +149,7 @@ def finger_views(buffer, n_fingers, n_nodes):
     return points, other, matrix, old, motion, centres, bounds, chunk_motion
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _world(q_node, axes, out):
     """A node's world position (3,) [m] from its coordinates ``q_node`` (≥ D,) on a finger with ``axes`` (D, 3)."""
     for k in range(3):
@@ -158,7 +158,7 @@ def _world(q_node, axes, out):
             out[k] += q_node[d] * axes[d, k]
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _nearest_on_finger(point, finger, eligible, first_edge, last_edge, nearest, candidate):
     """The nearest point of a finger's centre line, world nodes ``finger`` (N, 3), on its ``eligible`` (N − 1,)
     edges from ``first_edge`` to ``last_edge``: returns (distance [m], edge, t) and writes the point to ``nearest``
@@ -180,7 +180,7 @@ def _nearest_on_finger(point, finger, eligible, first_edge, last_edge, nearest, 
     return best, best_edge, best_t
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _onto_tangent_plane(vector, normal):
     """Removes from ``vector`` (3,) its part along the unit ``normal`` (3,)."""
     along = vector[0] * normal[0] + vector[1] * normal[1] + vector[2] * normal[2]
@@ -188,14 +188,14 @@ def _onto_tangent_plane(vector, normal):
         vector[k] -= along * normal[k]
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _finger_world(q_rod, axes, out):
     """A finger's world node positions (N, 3) [m] from its coordinates (N, ≥D)."""
     for i in range(q_rod.shape[0]):
         _world(q_rod[i], axes, out[i])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def find_near_fingers(q_old, q_pred, contact, near, scratch):
     """:func:`near_fingers_of_gripper` for every gripper, with the work buffer ``scratch``
     (:func:`finger_scratch`)."""
@@ -206,7 +206,7 @@ def find_near_fingers(q_old, q_pred, contact, near, scratch):
         near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near, scratch)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near, scratch):
     """For the gripper whose rods start at ``first_rod``: the nearest eligible edge of each other finger o to each
     node i of each rod r at the start of the step, into ``near[r, i, o]`` where the node is within the reach plus
@@ -271,7 +271,7 @@ def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near, scratch):
                     near[first_rod + f, i, o] = best_edge
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def any_near(near, r):
     """Whether any node of rod r is near another finger (``near`` (R, N, F) from :func:`find_near_fingers`)."""
     found = False
@@ -281,7 +281,7 @@ def any_near(near, r):
     return found
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def finger_contact_rod(r, q, q_old, q_pred, dt, contact, near, hessian, force, band, scratch):
     """Adds the other fingers' contact force on rod r's nodes [N] to ``force`` (N, S), in the rod's coordinates, and
     its Newton matrix to ``band`` (n, kd+1) (when ``hessian``), for the step of ``dt`` [s] from ``q_old`` with

@@ -16,9 +16,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from ..scene.discretization import Discretization
+from .compiled import kernel
 
 
 def rod_water_velocity(disc: Discretization, water_velocity: np.ndarray) -> np.ndarray:
@@ -29,7 +29,7 @@ def rod_water_velocity(disc: Discretization, water_velocity: np.ndarray) -> np.n
     return rods
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def project_water(finger_directions, water_velocity, rods):
     """:func:`rod_water_velocity` into ``rods`` (R, D), from the fingers' radial directions (F, 3): the compiled
     steps' one way to see the current from each rod."""
@@ -47,7 +47,7 @@ def project_water(finger_directions, water_velocity, rods):
                     rods[r, d] = water_velocity[b, d]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def linear_damping(coefficient, velocities, velocity_derivative, stride, force, band):
     """Adds −c_i·v_i to one rod's ``force`` (N, D) and c_i·∂v/∂q to the position diagonal of its ``band``
     (n, kd+1)."""
@@ -64,13 +64,13 @@ def linear_damping(coefficient, velocities, velocity_derivative, stride, force, 
 # adds exact zeros, so the arithmetic on the plane's two components is what a loop over them did, to the bit.
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _padded(array, i, dim):
     """Row i of an (N, D) array as a 3-tuple; its third component 0 in the planar model (D = 2)."""
     return (array[i, 0], array[i, 1], array[i, 2] if dim == 3 else 0.0)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _unit_tangent(start, end):
     """The unit vector from ``start`` to ``end`` (3-tuples)."""
     d = (end[0] - start[0], end[1] - start[1], end[2] - start[2])
@@ -78,7 +78,7 @@ def _unit_tangent(start, end):
     return (d[0] * inverse_length, d[1] * inverse_length, d[2] * inverse_length)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def morison_drag(positions, velocities, current, normal, tangential, velocity_derivative, stride, force, band):
     """Morison drag of every edge of one rod: adds the force to ``force`` (N, D) and its velocity Jacobian to
     ``band`` (n, kd+1).
@@ -123,7 +123,7 @@ def morison_drag(positions, velocities, current, normal, tangential, velocity_de
         start, v_start = end, v_end
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def added_mass(start_positions, accelerations, edge_mass, acceleration_derivative, stride, force, band):
     """Added-mass force −Σ ½·m_a·(I − t tᵀ)·a_node of every edge of one rod, with tangents at the start of the
     step; adds the force to ``force`` (N, D) and ½·m_a·(I − t tᵀ)·∂a/∂q on the node blocks of ``band``."""

@@ -12,17 +12,18 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from .compiled import kernel
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def symmetric_band_entry(band, i, j):
     """A[i, j] of one rod's symmetric band (n, kd+1), for |i − j| ≤ kd, read from the stored lower triangle."""
     kd = band.shape[1] - 1
     return band[i, kd - i + j] if j <= i else band[j, kd - j + i]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def scatter_contiguous(band, offset, hessian, m):
     """Add the symmetric m×m ``hessian`` of DOFs offset … offset+m−1 into one rod's band (n, kd+1)."""
     kd = band.shape[1] - 1
@@ -31,7 +32,7 @@ def scatter_contiguous(band, offset, hessian, m):
             band[offset + a, kd - a + b] += hessian[a, b]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def factor_banded_symmetric(a, free, row_scratch):
     """Factor one rod's band (n, kd+1) in place as L·D·Lᵀ; returns False at a zero or non-finite pivot.
     ``row_scratch`` (kd+1,) is work space.
@@ -110,7 +111,7 @@ def factor_banded_symmetric(a, free, row_scratch):
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def solve_factored(a, x, free, first):
     """Solve with a band factored by :func:`factor_banded_symmetric`, in place on ``x`` (n,); fixed DOFs get 0.
     ``x`` is zero above row ``first`` (0 where nothing is known), and so is L⁻¹·x: the forward passes start there.
@@ -159,7 +160,7 @@ def solve_factored(a, x, free, first):
     # row 0, if left over, updates nothing (and with kd = 0, L is the identity)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def solve_factored_six_columns(a, x, free, first):
     """:func:`solve_factored` for six right-hand sides at once (a rigid body's six DOFs), in place on the columns
     of ``x`` (n, 6): each column gets the same operations in the same order as alone, so the same bits.
@@ -200,7 +201,7 @@ def solve_factored_six_columns(a, x, free, first):
             x[k, 5] -= lik * x5
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def solve_banded_symmetric_rod(a, x, free):
     """Solve A·x = b for one rod in place: ``x`` holds b on entry and the solution on return; ``a`` (n, kd+1) is
     overwritten by its factors. Returns False if a pivot was zero or not finite (``x`` is then NaN)."""
@@ -211,7 +212,7 @@ def solve_banded_symmetric_rod(a, x, free):
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def solve_dense(a, x):
     """Solves A·x = b in place by Gaussian elimination with partial pivoting (rows swapped to the largest pivot of
     each column): ``x`` (n,) holds b on entry and the solution on return; ``a`` (n, n) is overwritten. Returns False,

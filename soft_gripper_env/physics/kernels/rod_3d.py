@@ -31,40 +31,40 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from .compiled import kernel
 from .linalg import scatter_contiguous
 
 # 3-vectors are tuples: value types that Numba keeps in registers, so the kernel allocates nothing per node.
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _axpy(alpha, a, beta, b):
     """alpha·a + beta·b."""
     return (alpha * a[0] + beta * b[0], alpha * a[1] + beta * b[1], alpha * a[2] + beta * b[2])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _scale(alpha, a):
     return (alpha * a[0], alpha * a[1], alpha * a[2])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _row(array, i):
     return (array[i, 0], array[i, 1], array[i, 2])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _parallel_transport(u, t1, t2):
     """Transport vector u from tangent t1 to tangent t2 (rotation about t1 × t2)."""
     b = _cross(t1, t2)
@@ -77,21 +77,21 @@ def _parallel_transport(u, t1, t2):
     return _axpy(_dot(u, t1), t2, 1.0, _axpy(_dot(u, n1), n2, _dot(u, b), b))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _rotate(v, axis, angle):
     c = math.cos(angle)
     s = math.sin(angle)
     return _axpy(c, v, 1.0, _axpy(s, _cross(axis, v), _dot(axis, v) * (1.0 - c), axis))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _signed_angle(u, v, axis):
     w = _cross(u, v)
     angle = math.atan2(math.sqrt(_dot(w, w)), _dot(u, v))
     return -angle if _dot(axis, w) < 0.0 else angle
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def rod_frames(qr, tangent_old, director_old, ref_twist_old, tangent, director1, ref_twist, m1, m2, lengths):
     """Frames of one rod at coordinates ``qr`` (N, 4), transported from the start-of-step frame.
 
@@ -132,7 +132,7 @@ t_e × d̃1, t_e + t̃, t_f + t̃, and the mixed derivatives' columns by θ_e an
 N_STENCIL_VECTORS = 20
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, stencil, vectors,
                 accumulate_hessian):
     """Bending and twisting energy at one interior node; writes the lower triangle of its Hessian (11, 11) over
@@ -265,7 +265,7 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, st
     return energy
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _cross_matrix_entry(vectors, row, i, j):
     """Entry (i, j) of the matrix [a]× with [a]×·b = a × b, for a = ``vectors[row]``."""
     if i == j:
@@ -280,7 +280,7 @@ def _cross_matrix_entry(vectors, row, i, j):
 # every array in a bundle costs reference counts each time Newton's inlined levels bind the bundle again.
 
 
-@njit(cache=True, nogil=True)
+@kernel(python=True)
 def elastic_scratch_size(n_nodes):
     """Elements of :func:`rod3d_elastic_rod`'s work buffer for rods of ``n_nodes`` nodes (0 for 0 nodes)."""
     if n_nodes == 0:
@@ -289,13 +289,13 @@ def elastic_scratch_size(n_nodes):
     return 13 * n_edges + n_nodes + 6 * 11 * 11 + N_STENCIL_VECTORS * 3 + 7 * 7
 
 
-@njit(cache=True, nogil=True)
+@kernel(python=True)
 def elastic_scratch(n_nodes):
     """:func:`rod3d_elastic_rod`'s work buffer for rods of ``n_nodes`` nodes (0: empty, for the planar model)."""
     return np.empty(elastic_scratch_size(n_nodes))
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(python=True, inline=True)
 def elastic_views(buffer, n_nodes):
     """The work arrays in ``buffer`` (:func:`elastic_scratch`): the edges' tangents, reference directors and material
     directors m1, m2 (N − 1, 3), the reference twist (N,), the edge lengths (N − 1,), :func:`_bend_twist`'s stencil
@@ -322,7 +322,7 @@ def elastic_views(buffer, n_nodes):
     return tangent, director, m1, m2, reference_twist, lengths, stencil, vectors, stretch_hessian
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
                       twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian, scratch):
     """Elastic energy of one rod [J]; adds −∇E to ``force`` (N, 4) and ∇²E to ``band`` (4N, 11).
@@ -372,7 +372,7 @@ def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, 
     return energy
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
                   twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian):
     """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 4) and ∇²E to ``band`` (R, 4N, 11).
@@ -388,7 +388,7 @@ def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stre
     return energy
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def rod3d_update_frames(q, tangent_old, director_old, ref_twist_old, tangent, director, ref_twist, scratch):
     """Frames at the end of a step: writes ``tangent``, ``director`` (R, N − 1, 3) and ``ref_twist`` (R, N);
     ``scratch`` is the 3-D energy's work buffer (:func:`elastic_scratch`)."""

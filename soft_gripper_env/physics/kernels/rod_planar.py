@@ -26,14 +26,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from .compiled import kernel
 
 # The energy terms of one edge or node are numbers in, numbers out, without a branch, and the rod's loop writes them
 # into its arrays: an inlined helper that took the arrays and branched on the Hessian kept Numba's reference counts
 # for binding them at each node (per basic block, LLVM removes those pairs only where nothing branches).
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _stretch(q, i, l0, ea):
     """Stretch energy of edge i of one rod, of rest length ``l0`` [m] and stiffness ``ea`` [N]: returns the energy
     [J], the force on node i (s, z) [N] (node i+1 takes its opposite) and the block K (ss, sz, zz) [N/m] of the
@@ -53,7 +54,7 @@ def _stretch(q, i, l0, ea):
     return energy, tension * tx, tension * tz, kxx, kxz, kzz
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _bend(q, i, k, kappa_bar):
     """Bending energy at interior node i of one rod, of stiffness ``k`` = EI/l_i [N·m]: returns the energy [J], its
     gradient over the stencil (s, z of nodes i−1, i, i+1) [N] and the lower triangle of its Hessian there, row by
@@ -95,7 +96,7 @@ def _bend(q, i, k, kappa_bar):
     return energy, gradient, hessian
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def planar_elastic_rod(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_length, natural_curvature, force,
                        band, accumulate_hessian):
     """Elastic energy of one rod [J]; adds −∇E to ``force`` (N, 2) and ∇²E to ``band`` (2N, 6).
@@ -142,7 +143,7 @@ def planar_elastic_rod(q, rest_length, stretch_stiffness, bend_stiffness, vorono
     return energy
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def planar_elastic(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_length, natural_curvature,
                    force, band, accumulate_hessian):
     """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 2) and ∇²E to ``band`` (R, 2N, 6).

@@ -31,10 +31,10 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from ..kernels.assembly import StepInputs, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, BodyState, body_in_rod_frames, planar_body_basis, turned
+from ..kernels.compiled import kernel
 from ..kernels.contact import ObjectView, find_penetrations, outward_normal, within_reach
 from ..kernels.finger_contact import find_near_fingers
 from ..kernels.local import local_array
@@ -126,7 +126,7 @@ class CorrectorWork(NamedTuple):
     """Newton's scratch for one gripper."""
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def corrector_work(q, dim, n_fingers, free_body, finger_contact):
     """:class:`CorrectorWork` for the rods of ``q`` (R, N, S) with ``dim`` position coordinates and ``n_fingers``
     rods per gripper, against a ``free_body`` or a fixed object, with or without ``finger_contact``."""
@@ -140,7 +140,7 @@ def corrector_work(q, dim, n_fingers, free_body, finger_contact):
                          np.empty((n_bases, 6, 6)), new_work(q, dim, n_fingers, free_body, True, finger_contact))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result):
     """The predictor–corrector for every gripper of a batch (see the module notes): :func:`correct_contacts` with
     its scratch made here. Every bundle arrives as its fields in plain tuples (:func:`~.newton.plain`)."""
@@ -148,7 +148,7 @@ def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, f
     correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result, work)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result, work):
     """The predictor–corrector for every gripper of a batch (see the module notes), with the scratch ``work``
     (:class:`CorrectorWork`).
@@ -168,7 +168,7 @@ def correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, fre
     _correct(q, step, rods, terms, solver, holds, hold_at, geometry, named_free_body(free_body), result, work)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _named_free_body(free_body):
     """The bodies' arrays and their unknowns as plain tuples, named (:class:`~..kernels.body.BodyArrays`,
     :class:`~..kernels.body.BodyMotion`)."""
@@ -182,7 +182,7 @@ named_free_body = none_or(_named_free_body)
 :mod:`~..kernels.typed_none`)."""
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _body_coupling(moving, geometry, held, dim, basis_work):
     """What couples the rods to the ``moving`` bodies in Newton's method (:class:`~.newton.BodyCoupling`): in 3-D
     every motion of a body, planar the motions in the plane that its held nodes leave it."""
@@ -194,7 +194,7 @@ body_coupling = none_or(_body_coupling)
 """:func:`_body_coupling`, or None for a fixed object (chosen as the kernel compiles)."""
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, result, work):
     """The corrector's loop; ``moving`` is None for a fixed object, else (bodies, their motion), and every branch
     on the body tests it, so that a fixed object's loop is compiled without them."""
@@ -243,7 +243,7 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
         _body_frame_offsets(new_hold, sliding, positions, holds, moving[1], n_fingers)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _hold_in_place(positions, held, sliding, hold_at, solve):
     """Puts the stuck nodes of the rods to be solved on their hold points (a fixed object's holds)."""
     for r in range(positions.shape[0]):
@@ -255,7 +255,7 @@ def _hold_in_place(positions, held, sliding, hold_at, solve):
                     positions[r, i, d] = hold_at[r, i, d]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shift):
     """After a solve with free bodies: their orientation at the solution, the object as each rod sees it there, and
     its displacement over the step in each rod's coordinates (``shift`` (R, D))."""
@@ -273,7 +273,7 @@ def _body_at_solution(step, solver, holds, geometry, body, motion, rotation, shi
                 + projection[r, d, 1] * (c[b, 1] - c_old[b, 1]) + projection[r, d, 2] * (c[b, 2] - c_old[b, 2])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _anchors(holds, motion, n_fingers, anchors):
     """Where each held node of a free body's rods stuck last, P·(c + R·r_h) at the body's pose after the last solve,
     into ``anchors`` (R, N, D), which it returns."""
@@ -294,7 +294,7 @@ def _anchors(holds, motion, n_fingers, anchors):
     return anchors
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _body_frame_offsets(new_hold, stuck_again, hold_at, holds, motion, n_fingers):
     """The offset of each new hold, and each sliding node that sticks again, in its body's frame at the end of the
     last solve [m], into ``holds.offsets``."""
@@ -320,7 +320,7 @@ FRICTION_TOLERANCE = 5e-3
 fraction since the solve (plus Newton's force tolerance)."""
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def contact_changes(positions, old_positions, anchors, residual, holds, view, friction, solver, within_budget,
                     settle_friction, changes, found):
     """The corrector's test after a solve, for rods whose nodes are at ``positions`` (R, N, D) and whose residual
@@ -452,7 +452,7 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
                 changed[r] = True
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def corrector_continues(within_budget, new_hold, changed, again):
     """The corrector's decision after a test: whether to solve again, and which rods (``again`` (R,)). Within the
     budget, every rod that changed. Once the budget is spent, only while nodes are inside the object, and only
@@ -466,7 +466,7 @@ def corrector_continues(within_budget, new_hold, changed, again):
     return again.any()
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def update_holds(within_budget, holds, changes, again, n_fingers, whole_gripper):
     """The holds of the next solve, in place (:class:`ContactChanges`): new penetrations held (stuck), within the
     budget adhesive holds released, and every hold stuck or sliding as the test found, with its friction. Only for
@@ -492,7 +492,7 @@ def update_holds(within_budget, holds, changes, again, n_fingers, whole_gripper)
                 holds.friction[r, i, d] = changes.friction[r, i, d] if sliding[r, i] else 0.0
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def contact_masks(clamp_free, held, sliding, dim, free, measured):
     """The DOFs Newton solves for, ``free`` (R, n), and those its test measures as they are, ``measured`` (R, n),
     from the clamp's ``clamp_free`` (R, n) and the contacts (R, N): a stuck node's position DOFs are fixed (it moves

@@ -38,10 +38,10 @@ from contextlib import contextmanager
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 from numba.core import types
 
 from ..kernels.assembly import FINGERS_FIELD, N_DESIGN_FIELDS, StepInputs, named_rods
+from ..kernels.compiled import kernel
 from ..kernels.finger_contact import finger_scratch_size
 from ..kernels.forces import project_water
 from ..kernels.local import local_array
@@ -228,7 +228,7 @@ def rods_kernel(shape: RodsKernelShape):
     return _compiled(shape, _build_rods_kernel)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def copy_rod(source, source_rod, target, target_rod, frames):
     """Copies rod ``source_rod`` of the state ``source`` into rod ``target_rod`` of ``target``, element by element
     (the GPU build copies no array into another by slice). A state is a tuple (q, velocity, acceleration (R, N, S),

@@ -28,10 +28,10 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from ..kernels.assembly import StepInputs, assemble_rod, named_rods
 from ..kernels.body import BodyArrays, BodyMotion, admissible_rotation, body_residual, turned
+from ..kernels.compiled import kernel
 from ..kernels.contact import along_surface, onto_surface, rotate_node, tangent_basis
 from ..kernels.finger_contact import any_near, finger_scratch, near_fingers_of_gripper
 from ..kernels.linalg import (
@@ -145,7 +145,7 @@ MAX_STEP_HALVINGS = 6
 
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_block, body_rhs, factored, scratch):
     """Eliminates each rod's free DOFs from the coupled Newton system.
 
@@ -218,7 +218,7 @@ def eliminate_rods(band, coupling, free, coupled, active, x0, x_coupling, body_b
     return failures
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _six_sums(a, k, b, first, last, rows):
     """Σ_i a[i, k]·b[i, m] for m = 0 … 5, over the rows first … last (those where ``rows`` is True, or all where it is
     None), each sum in ascending i. The six together, as six chains the CPU overlaps where one sum at a time waited
@@ -236,7 +236,7 @@ def _six_sums(a, k, b, first, last, rows):
     return t0, t1, t2, t3, t4, t5
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _nonzero_rows(s):
     """The first and last rows of ``s`` (n, 6) with a non-zero entry; (n, −1) when there is none."""
     first, last = s.shape[0], -1
@@ -248,7 +248,7 @@ def _nonzero_rows(s):
     return first, last
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def newton(q, step, rods, terms, solver, free, holds, coupling, solve, result, work):
     """Newton's method for the rods where ``solve`` (R,) is True, each gripper at once (see the module notes).
 
@@ -304,7 +304,7 @@ class NewtonWork(NamedTuple):
     last_ratio: np.ndarray
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def new_work(q, dim, n_fingers, coupled, contact, fingers):
     """The work arrays; those only a body's solve (``coupled``), a contact's (``contact``) or the line search of
     fingers touching each other (``fingers``) uses are empty, and shared, otherwise: every allocation counts in the
@@ -334,7 +334,7 @@ def new_work(q, dim, n_fingers, coupled, contact, fingers):
                       np.empty(band_width + 1), *surface)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve, result, work):
     """Newton's method for gripper b's rods where ``solve`` is True (all of them, and the body, with a free body)."""
     # arrays taken out of their bundles once: a bundle's member read in a loop costs a reference count each time
@@ -476,7 +476,7 @@ def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve
         _finish_gripper(first, n_fingers, False, iterations, gripper_ratio, result)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _rod_system(r, q, step, rods, terms, solver, measured, holds, fixed_object, residual, right_hand_side, largest,
                 band, scratch, normals, basis, matrix):
     """Rod r's Newton system at ``q``: its sliding nodes put onto the object's surface where the object is
@@ -491,7 +491,7 @@ def _rod_system(r, q, step, rods, terms, solver, measured, holds, fixed_object, 
                           scratch, normals, basis, matrix)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _rod_equations(r, q, step, rods, terms, solver, measured, holds, residual, right_hand_side, largest, band, scratch,
                    normals, basis, matrix):
     """Rod r's residual and right-hand side at ``q`` as it is, and its Newton matrix when ``matrix`` (else the band
@@ -506,7 +506,7 @@ def _rod_equations(r, q, step, rods, terms, solver, measured, holds, residual, r
     return own, largest
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _back_off_rod(r, q, rod_delta, fraction):
     """Takes ``fraction`` of rod r's last Newton step ``rod_delta`` (n,) back."""
     stride = q.shape[2]
@@ -515,7 +515,7 @@ def _back_off_rod(r, q, rod_delta, fraction):
             q[r, i, s] -= fraction * rod_delta[i * stride + s]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _place_held_nodes(b, r, q, holds, coupling, rod_coupling, normals, body_residual):
     """Puts rod r's stuck nodes on the free body, x = P·(c + R·r_h), and its sliding nodes onto the body's surface
     at their current point; writes S = P·[I, −[a]×], the motion of each held DOF per unit body motion, into
@@ -593,7 +593,7 @@ def _place_held_nodes(b, r, q, holds, coupling, rod_coupling, normals, body_resi
             body_residual[k] += load  # the friction's reaction on the body: −(−f) on its point
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _slide_on_fixed_object(r, q, holds, normals):
     """Puts rod r's sliding nodes onto a fixed object's surface at their current point, their normals into
     ``normals`` (N, D)."""
@@ -603,7 +603,7 @@ def _slide_on_fixed_object(r, q, holds, normals):
             onto_surface(q[r, i, :dim], holds.starts[r], holds.ends[r], holds.radii[r, i], normals[i])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _slide_rows(r, holds, normals, residual, right_hand_side, band, tolerance_inverse, own, largest, basis):
     """Rod r's sliding nodes in Newton's system: their friction joins the residual (n,) and the right-hand side (n,),
     whose node blocks and the band (n, kd+1) are then turned into each node's surface frame (normal, tangents),
@@ -637,7 +637,7 @@ def _slide_rows(r, holds, normals, residual, right_hand_side, band, tolerance_in
     return own, largest
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _unrotate_steps(first_rod, holds, work):
     """Turns the Newton steps of every active rod's sliding nodes, x0 and X (work), from their surface frames back
     into the rod's coordinates."""
@@ -670,7 +670,7 @@ def _unrotate_steps(first_rod, holds, work):
                         x_coupling[f, first + d, column] = value[d]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_side, largest, band, scratch, matrix):
     """Assembles rod r and writes its residual (n,) into ``residual`` and its negation, the Newton step's right-hand
     side, into ``right_hand_side`` (n,), its Newton matrix into ``band`` (n, kd+1) (the elastic part when ``matrix``:
@@ -698,7 +698,7 @@ def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_si
     return own, largest
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _load_body(right_hand_side, coupling, body_residual):
     """Adds a touching rod's reactions, its residual on held DOFs (the negated Newton right-hand side (n,), in the
     frames the DOFs are solved in) moved by ``coupling`` (n, 6), to the body's residual (6,)."""
@@ -707,7 +707,7 @@ def _load_body(right_hand_side, coupling, body_residual):
             body_residual[k] -= coupling[j, k] * right_hand_side[j]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _body_residual_in_basis(basis, body_tolerance, own, total, largest):
     """The body's residual ``own`` (6,) in its admissible motions, Bᵀ·own, into ``total``; returns ``largest``
     updated with its scaled entries."""
@@ -721,7 +721,7 @@ def _body_residual_in_basis(basis, body_tolerance, own, total, largest):
     return largest
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _rods_continue(first, it, max_iterations, result, work):
     """For rods on their own: marks the rods that converged (or ran out of iterations) as done; returns whether
     any still iterates."""
@@ -741,7 +741,7 @@ def _rods_continue(first, it, max_iterations, result, work):
     return going
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _body_step(b, basis, work):
     """The body's Newton step (6,) into ``work.body_step``, from the reduced system Bᵀ·A·B δ = −Bᵀ·G + Bᵀ·Σ rhs
     (A the body's matrix plus the rods' Schur complements; unused columns of B get the identity). Returns False,
@@ -780,7 +780,7 @@ def _body_step(b, basis, work):
     return True
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _apply_step(b, first, q, coupling, work):
     """Moves every active rod by its Newton step, x0 − X·δ (δ the body's step, for rods that touch it; both are zero
     on fixed DOFs), and the body by δ; remembers the rods' steps for the line search."""
@@ -808,7 +808,7 @@ def _apply_step(b, first, q, coupling, work):
             coupling.motion.rotation[b, k] += work.body_step[3 + k]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _back_off(b, first, q, motion, work, fraction):
     """Takes ``fraction`` of the last Newton step back, rods and body (the line search of a free body's solve)."""
     for f in range(work.active.size):
@@ -818,7 +818,7 @@ def _back_off(b, first, q, motion, work, fraction):
         motion.rotation[b, k] -= fraction * work.body_step[3 + k]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _finish_gripper(first, n_fingers, converged, iterations, ratio, result):
     """Gives every rod of a gripper solved with its body the gripper's outcome."""
     for r in range(first, first + n_fingers):
@@ -827,7 +827,7 @@ def _finish_gripper(first, n_fingers, converged, iterations, ratio, result):
         result.ratio[r] = ratio
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water, dt, rods, terms, solver, midpoint,
                  q, velocity, acceleration):
     """A whole backward-Euler step of rods that move on their own, in one call (the hot path of a scene without
@@ -854,7 +854,7 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
     return per_gripper(result.converged, result.iterations, result.ratio, solver.n_fingers)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(python=True, inline=True)
 def step_gripper_rods(b, velocity_old, acceleration_old, step, rods, terms, solver, midpoint, q, velocity,
                       acceleration, every_rod, result, work):
     """Gripper b's rods, on their own, through one backward-Euler step from ``step.q_old`` (:func:`advance_rods`,
@@ -874,7 +874,7 @@ def step_gripper_rods(b, velocity_old, acceleration_old, step, rods, terms, solv
             _midpoint_end_rod(r, q_old, velocity_old, q, velocity)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def predict(q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
     """The predictor q_pred = q_old + Δt·v_old of every rod, and Newton's start q_pred + Δt²·a_old, the last step's
     motion extrapolated (``acceleration_old`` empty: the predictor itself). Arrays (R, N, S)."""
@@ -882,7 +882,7 @@ def predict(q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
         _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q_start)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
     extrapolate = acceleration_old.size > 0
     for i in range(q_old.shape[1]):
@@ -891,14 +891,14 @@ def _predict_rod(r, q_old, velocity_old, acceleration_old, dt, q_pred, q_start):
             q_start[r, i, k] = q_pred[r, i, k] + (dt * dt * acceleration_old[r, i, k] if extrapolate else 0.0)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def finish(q, q_old, velocity_old, dt, velocity, acceleration):
     """The end of a backward-Euler step of every rod: v = (q − q_old)/Δt and the mean acceleration (v − v_old)/Δt."""
     for r in range(q.shape[0]):
         _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration):
     for i in range(q.shape[1]):
         for k in range(q.shape[2]):
@@ -906,7 +906,7 @@ def _finish_rod(r, q, q_old, velocity_old, dt, velocity, acceleration):
             acceleration[r, i, k] = (velocity[r, i, k] - velocity_old[r, i, k]) / dt
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def midpoint_end(q_old, velocity_old, q, velocity):
     """The implicit midpoint rule's end from its backward-Euler half step (see :mod:`.integrators`), in place:
     q₁ = 2·q_½ − q₀, v₁ = 2·v_½ − v₀. Arrays (R, N, S)."""
@@ -914,7 +914,7 @@ def midpoint_end(q_old, velocity_old, q, velocity):
         _midpoint_end_rod(r, q_old, velocity_old, q, velocity)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _midpoint_end_rod(r, q_old, velocity_old, q, velocity):
     for i in range(q.shape[1]):
         for k in range(q.shape[2]):
@@ -922,7 +922,7 @@ def _midpoint_end_rod(r, q_old, velocity_old, q, velocity):
             velocity[r, i, k] = 2.0 * velocity[r, i, k] - velocity_old[r, i, k]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def per_gripper(converged, iterations, ratio, n_fingers):
     """A step's per-rod Newton results (R,) per gripper (B,): whether every finger converged, the most iterations,
     and the largest residual ratio (NaN read as inf)."""

@@ -21,9 +21,9 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from ..kernels.assembly import FINGERS_FIELD
+from ..kernels.compiled import kernel
 from ..kernels.contact import contact_reactions
 from ..kernels.forces import project_water
 from ..kernels.rod_3d import rod3d_update_frames
@@ -143,7 +143,7 @@ class StepWork(NamedTuple):
     corrector_work: CorrectorWork
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def step_work(state, n_fingers, dim, finger_contact, free_body):
     """:class:`StepWork` for the batch of ``state`` (:class:`WorkingState`) with ``n_fingers`` rods per gripper and
     ``dim`` position coordinates, with or without ``finger_contact``, against a ``free_body`` or a fixed object."""
@@ -165,7 +165,7 @@ def step_work(state, n_fingers, dim, finger_contact, free_body):
                     np.arange(n_grippers), corrector_work(state.q, dim, n_fingers, free_body, finger_contact))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, state, interval):
     """Takes a step of length ``dt`` [s] into the running grippers ``grippers`` (m,) of ``state``
     (:class:`WorkingState`) from the m grippers of ``new``, those the step left ``ok`` (m,) bool: copies their state,
@@ -216,7 +216,7 @@ def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, st
         interval.clock[b] += dt
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(python=True)
 def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body, interval):
     """:func:`step_batch` with its scratch made here: the CPU's entry point."""
     work = step_work(state, solver[5], geometry[0].shape[1], rods[FINGERS_FIELD][0] > 0.0, body is not None)
@@ -224,7 +224,7 @@ def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
                       interval, work)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@kernel(python=True, inline=True)
 def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body, interval,
                work):
     """Steps ``first`` … ``n_steps`` − 1 of length ``dt`` [s] of every running gripper, from and into ``state``
@@ -316,7 +316,7 @@ def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
     return n_steps
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel
 def _with_motion(body, motion):
     return body, motion
 

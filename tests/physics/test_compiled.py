@@ -1,0 +1,68 @@
+"""The one decorator the physics compiles with (soft_gripper_env/physics/kernels/compiled.py)."""
+
+import importlib
+import pkgutil
+
+import numpy as np
+import pytest
+from numba.core.dispatcher import Dispatcher
+
+import soft_gripper_env.physics as physics
+from soft_gripper_env.physics.kernels.compiled import kernel
+
+
+@kernel
+def _sum_of_squares(values):
+    total = 0.0
+    for value in values:
+        total += value * value
+    return total
+
+
+@kernel(python=True)
+def _norm(values):
+    return np.sqrt(_sum_of_squares(values))
+
+
+def _python_entry(dispatcher) -> int:
+    """The address of the CPython wrapper of ``dispatcher``'s one compiled signature (0: none was built)."""
+    (compiled,) = dispatcher.overloads.values()
+    return compiled.library.get_pointer_to_function(compiled.fndesc.llvm_cpython_wrapper_name)
+
+
+def test_a_kernel_that_python_does_not_call_compiles_without_an_entry_point_and_its_callers_still_run():
+    assert _norm(np.array([3.0, 4.0])) == 5.0
+    assert _python_entry(_norm) != 0
+    assert _python_entry(_sum_of_squares) == 0  # compiled for its caller, without the wrapper
+
+
+def test_calling_a_kernel_only_kernel_from_python_raises_a_clear_error_instead_of_crashing():
+    with pytest.raises(TypeError, match=r"_sum_of_squares is compiled to be called from other compiled kernels.*"
+                                        r"python=True"):
+        _sum_of_squares(np.array([1.0]))
+
+
+@pytest.mark.parametrize("argument", ["python", "inline"])
+def test_the_decorator_refuses_an_option_that_is_not_a_bool(argument):
+    with pytest.raises(TypeError, match=f"kernel\\({argument}=...\\) must be a bool"):
+        kernel(**{argument: "yes"})
+
+
+def _physics_dispatchers():
+    for module_info in pkgutil.walk_packages(physics.__path__, physics.__name__ + "."):
+        module = importlib.import_module(module_info.name)
+        for name, value in vars(module).items():
+            if isinstance(value, Dispatcher) and value.py_func.__module__ == module.__name__:
+                yield f"{module.__name__}.{name}", value
+
+
+def test_every_compiled_function_of_the_physics_is_made_by_the_one_decorator():
+    dispatchers = dict(_physics_dispatchers())
+    assert len(dispatchers) > 50
+    for name, dispatcher in dispatchers.items():
+        options = dispatcher.targetoptions
+        assert options.get("nogil") is True and options.get("error_model") == "numpy", name
+        assert options.get("inline") in ("always", "never"), name
+        assert type(dispatcher._cache).__name__ != "NullCache", f"{name} is not cached"
+        internal = options.get("no_cpython_wrapper", False)
+        assert (type(dispatcher).__name__ == "KernelOnlyDispatcher") == internal, name
