@@ -5,6 +5,7 @@ import pkgutil
 
 import numpy as np
 import pytest
+from numba import types
 from numba.core.dispatcher import Dispatcher
 
 import soft_gripper_env.physics as physics
@@ -25,8 +26,11 @@ def _norm(values):
 
 
 def _python_entry(dispatcher) -> int:
-    """The address of the CPython wrapper of ``dispatcher``'s one compiled signature (0: none was built)."""
-    (compiled,) = dispatcher.overloads.values()
+    """The address of the CPython wrapper of ``dispatcher`` compiled for a float64 vector, compiled or loaded from
+    the cache here (0: none was built)."""
+    signature = (types.float64[::1],)
+    dispatcher.compile(signature)
+    compiled = dispatcher.overloads[signature]
     return compiled.library.get_pointer_to_function(compiled.fndesc.llvm_cpython_wrapper_name)
 
 
