@@ -148,7 +148,9 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
 
         task = GraspTask(**{name: act.trained_task[name] for name in ("model", "observation", *REFLEXES)})
         act = residual_policy(act, ResidualAction(task, make_policy(residual["base"], task, 0), residual["rate"],
-                                                  residual.get("gust_hold", False), residual.get("press_limit")))
+                                                  gust_hold=residual.get("gust_hold", False),
+                                                  press_limit=residual.get("press_limit"),
+                                                  close_untouched=residual.get("close_untouched", False)))
     return act
 
 

@@ -28,31 +28,35 @@ class ResidualAction:
     """The env action of ``base``'s rate plus ``rate`` × the residual [1/s], per finger, through ``task``'s action
     map. ``base`` acts on raw observations (one or a batch), as the scripted controllers do.
 
-    Two optional guards limit what the correction may do, the same in training and in use (the policy is the
+    Three optional guards limit what the correction may do, the same in training and in use (the policy is the
     correction and its guards): with ``gust_hold``, it may not open a finger (a positive rate) while a gust may blow
     (:func:`~agents.scripted.gust_window`), so that it cannot hold more loosely than its controller through the
     gust; with ``press_limit`` (a fraction of the specimen's fragility limit, in (0, 1]), it may not close a finger
-    (a negative rate) that presses above that fraction of the limit. The observation must hold the sensors' parts
-    (finger forces, fragility limit, episode fraction) for either."""
+    (a negative rate) that presses above that fraction of the limit; with ``close_untouched``, it may not open a
+    finger that does not touch the specimen (the observation's ``touching`` part), so that it cannot hold back a
+    finger the controller closes onto the specimen. The observation must hold the sensors' parts (finger forces,
+    touching, fragility limit, episode fraction) for any of them."""
 
     def __init__(self, task: GraspTask, base: Callable[[np.ndarray], np.ndarray], rate: float,
-                 gust_hold: bool = False, press_limit: float | None = None) -> None:
+                 gust_hold: bool = False, press_limit: float | None = None, close_untouched: bool = False) -> None:
         check_range("ResidualAction", "rate", rate, "1/s", 0.0, task.max_curvature_rate, high_inclusive=True)
         if press_limit is not None:
             check_range("ResidualAction", "press_limit", press_limit, "(dimensionless)", 0.0, 1.0,
                         high_inclusive=True)
         self.task, self.base, self.rate = task, base, rate
-        self.gust_hold, self.press_limit = bool(gust_hold), press_limit
-        if self.gust_hold or press_limit is not None:
+        self.gust_hold, self.press_limit, self.close_untouched = bool(gust_hold), press_limit, bool(close_untouched)
+        self._guards = self.gust_hold or press_limit is not None or self.close_untouched
+        if self._guards:
             layout = observation_slices(task)
             self._forces, self._limit = layout["finger_forces"], layout["fragile_force"]
             self._fraction, self._window = layout["episode_fraction"], gust_window(task)
+            self._touching = layout["touching"]
 
     def __call__(self, observation: np.ndarray, residual: np.ndarray) -> np.ndarray:
         """The env action [−1, 1] for ``observation`` (raw) and the residual in [−1, 1] (clipped), same shapes."""
         base_rate = self.task.curvature_rate(np.asarray(self.base(observation), dtype=float))
         correction = self.rate * np.clip(np.asarray(residual, dtype=float), -1.0, 1.0)
-        if self.gust_hold or self.press_limit is not None:
+        if self._guards:
             correction = self._guarded(np.asarray(observation, dtype=float), correction)
         return self.task.action_for_rate(base_rate + correction).astype(np.float32)
 
@@ -64,11 +68,15 @@ class ResidualAction:
         if self.press_limit is not None:
             pressing = observation[..., self._forces] > self.press_limit * observation[..., self._limit]
             correction = np.where(pressing, np.maximum(correction, 0.0), correction)
+        if self.close_untouched:
+            untouched = observation[..., self._touching] < 0.5
+            correction = np.where(untouched, np.minimum(correction, 0.0), correction)
         return correction
 
     def settings(self) -> dict:
         """What a run's config.json records of the correction besides its controller (``residual``)."""
-        return {"rate": self.rate, "gust_hold": self.gust_hold, "press_limit": self.press_limit}
+        return {"rate": self.rate, "gust_hold": self.gust_hold, "press_limit": self.press_limit,
+                "close_untouched": self.close_untouched}
 
 
 class ResidualVecEnv(VecEnvWrapper):

@@ -4,7 +4,7 @@
         [--model 3d] [--observation sensors] [--validate-every 50000] [--eval-episodes 200]
         [--touching-closing-rate RATE] [--approach-slowing-gap M] [--final-pressure-weight 12]
         [--pressure-ramp 200000 400000] [--checkpoint-every 100000] [--residual-to reactive_tuned]
-        [--residual-rate 0.1] [--residual-gust-hold] [--residual-press-limit FRACTION]
+        [--residual-rate 0.1] [--residual-gust-hold] [--residual-press-limit FRACTION] [--residual-close-untouched]
 
 By default PPO trains in the env's default rod model (3-D; ``--model planar`` costs about a third per step) on the
 sensors' observation (``GraspTask.observation``), whose readings mean the same in both models, so a policy trained
@@ -23,9 +23,10 @@ scripted controllers on held-out seeds (evaluation.json; seeds from 1,000,000, w
 With ``--residual-to CONTROLLER`` PPO learns a correction to a scripted controller instead (agents/residual.py):
 its action adds up to ``--residual-rate`` [1/s] to the controller's rate, finger by finger, and the folder's
 config.json records the controller, so ``agents.evaluate --policy DIR`` runs the two together.
-``--residual-gust-hold`` forbids the correction to open a finger while a gust may blow, and
-``--residual-press-limit F`` to close one that presses above F times the specimen's fragility limit
-(:class:`agents.residual.ResidualAction`'s guards; config.json records them too).
+``--residual-gust-hold`` forbids the correction to open a finger while a gust may blow,
+``--residual-press-limit F`` to close one that presses above F times the specimen's fragility limit, and
+``--residual-close-untouched`` to open one that does not touch the specimen (:class:`agents.residual.ResidualAction`'s
+guards; config.json records them too).
 """
 
 from __future__ import annotations
@@ -288,6 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--residual-press-limit", type=float, default=None, metavar="FRACTION",
                         help="the correction may not close a finger pressing above this fraction of the specimen's "
                              "fragility limit, in (0, 1] (with --residual-to; default: no limit)")
+    parser.add_argument("--residual-close-untouched", action="store_true",
+                        help="the correction may not open a finger that does not touch the specimen (with "
+                             "--residual-to)")
     parser.add_argument("--eval-episodes", type=int, default=200, help="held-out episodes at the end (0: none)")
     parser.add_argument("--validate-every", type=int, default=50_000,
                         help="env steps between measures of the deterministic policy on validation seeds, the "
@@ -321,8 +325,10 @@ def main(argv: list[str] | None = None) -> dict:
     if not 0.0 < args.residual_rate <= task.max_curvature_rate:
         parser.error(f"--residual-rate = {args.residual_rate} is outside (0, {task.max_curvature_rate:g}] 1/s (the "
                      f"fastest closing)")
-    if not args.residual_to and (args.residual_gust_hold or args.residual_press_limit is not None):
-        parser.error("--residual-gust-hold and --residual-press-limit guard a correction: they need --residual-to")
+    if not args.residual_to and (args.residual_gust_hold or args.residual_press_limit is not None
+                                 or args.residual_close_untouched):
+        parser.error("--residual-gust-hold, --residual-press-limit and --residual-close-untouched guard a "
+                     "correction: they need --residual-to")
     if args.residual_press_limit is not None and not 0.0 < args.residual_press_limit <= 1.0:
         parser.error(f"--residual-press-limit = {args.residual_press_limit} is outside (0, 1] (a fraction of the "
                      f"fragility limit)")
@@ -332,7 +338,8 @@ def main(argv: list[str] | None = None) -> dict:
     residual, combine = None, None
     if args.residual_to:
         combine = ResidualAction(task, make_policy(args.residual_to, task, args.seed), args.residual_rate,
-                                 args.residual_gust_hold, args.residual_press_limit)
+                                 gust_hold=args.residual_gust_hold, press_limit=args.residual_press_limit,
+                                 close_untouched=args.residual_close_untouched)
         venv = ResidualVecEnv(venv, combine)
         residual = {"base": args.residual_to, **combine.settings()}
     env = VecNormalize(VecMonitor(venv, info_keywords=("is_success",)), gamma=PPO_SETTINGS["gamma"])

@@ -73,7 +73,8 @@ def test_a_residual_run_saves_its_controller_and_evaluates_as_the_two_together(t
                     "--residual-to", "reactive_tuned", "--residual-rate", "0.05", "--eval-episodes", "0",
                     "--validate-every", "0", "--checkpoint-every", "0"])
     config = json.loads((tmp_path / "config.json").read_text())
-    assert config["residual"] == {"base": "reactive_tuned", "rate": 0.05, "gust_hold": False, "press_limit": None}
+    assert config["residual"] == {"base": "reactive_tuned", "rate": 0.05, "gust_hold": False, "press_limit": None,
+                                  "close_untouched": False}
     assert config["policy"]["log_std_init"] == pytest.approx(np.log(0.2))
     policy = load_ppo(tmp_path)
     import pickle
@@ -133,3 +134,29 @@ def test_the_guards_stop_a_correction_opening_in_the_gust_window_and_closing_nea
     assert np.abs(unguarded[gusty & (residual > 0)]).max() > 0.01  # the guard is what removed it
     with pytest.raises(ValueError, match="ResidualAction.press_limit"):
         ResidualAction(SENSORS, controller, 0.1, press_limit=1.5)
+
+
+def test_the_untouched_guard_stops_a_correction_holding_back_a_finger_that_does_not_touch():
+    from soft_gripper_env.env import observation_slices
+
+    controller = ReactivePolicy(SENSORS, **TUNED_3D_GAINS)
+    layout = observation_slices(SENSORS)
+    rng = np.random.default_rng(7)
+    obs = np.repeat(observations(2), 3, axis=0)
+    obs[:, layout["touching"]] = rng.integers(0, 2, (len(obs), 3)).astype(np.float32)
+    residual = rng.uniform(-1.0, 1.0, (len(obs), 3))
+    free = ResidualAction(SENSORS, controller, 0.1)
+    guarded = ResidualAction(SENSORS, controller, 0.1, close_untouched=True)
+    assert guarded.settings()["close_untouched"] is True
+
+    def correction(combine):
+        return SENSORS.curvature_rate(combine(obs, residual).astype(float)) \
+            - SENSORS.curvature_rate(controller(obs).astype(float))
+
+    untouched = obs[:, layout["touching"]] < 0.5
+    unguarded, kept = correction(free), correction(guarded)
+    assert (untouched & (residual > 0)).any() and (~untouched).any()
+    assert np.all(kept[untouched] <= 1e-6)  # an untouched finger is never held back
+    np.testing.assert_allclose(kept[untouched & (residual < 0)], unguarded[untouched & (residual < 0)], atol=1e-6)
+    np.testing.assert_allclose(kept[~untouched], unguarded[~untouched], atol=1e-6)
+    assert np.abs(unguarded[untouched & (residual > 0)]).max() > 0.01  # the guard is what removed it
