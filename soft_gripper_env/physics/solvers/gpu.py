@@ -2,7 +2,7 @@
 Numba from the same functions as the CPU kernels.
 
 There is one copy of the physics. A CUDA kernel here is only the loop a CPU entry point runs around the shared
-functions, compiled by numba-cuda: it meets a CPU-compiled (``@njit``) function in a kernel and compiles it from its
+functions, compiled by numba-cuda: it meets a CPU-compiled (``@kernel``) function in a kernel and compiles it from its
 Python source as a device function, with everything it calls. For that, the shared functions allocate nothing
 (their work arrays come in as arguments: made once per call on the CPU, the thread's ``cuda.local.array`` on the
 GPU; a few numbers of scratch from :func:`~..kernels.local.local_array`) and use only what both targets have
@@ -217,7 +217,7 @@ def _compiled(shape: tuple, build):
 def rods_kernel(shape: RodsKernelShape):
     """The CUDA kernel that steps rods on their own through a control interval, for grippers of ``shape``
     (compiled on its first launch, then kept). Its arguments are tuples of device arrays (a tuple reaches the
-    simulator's threads as the host's arrays, where the shared ``@njit`` functions can take them):
+    simulator's threads as the host's arrays, where the shared ``@kernel`` functions can take them):
 
     ``state`` = (q, velocity, acceleration (R, N, S), tangent, director (R, N − 1, 3), reference twist (R, N));
     ``rods`` = the design's fields of :class:`~..kernels.assembly.RodArrays` and the finger contact's, as plain
