@@ -11,7 +11,7 @@ as they end:
 
 - **GPU speed** for each of ``--sizes`` envs: env steps per second over ``--steps`` actions after a first one (whose
   time, less a later one's, is mostly the kernels' compile), and the share of that time spent in the physics
-  (``Simulator.advance``: copies to and from the device, the kernel, a halved step on the CPU) against the task's
+  (``Simulator.advance``: copies to and from the device, the kernel with any halved steps) against the task's
   own work on the host;
 - **the CPU anchor, in the same run**: ``make_vec(64)`` on one thread with the same controller, and the ratio of
   each GPU figure to it.

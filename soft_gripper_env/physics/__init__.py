@@ -6,6 +6,7 @@ per-rod functions) → :mod:`.solvers` (Newton, the contact corrector, the integ
 """
 
 from .kernels.assembly import StepContext, evaluate_force
+from .kernels.current import current_at
 from .scene.design import (
     ELASTOSIL_MA_4601,
     SILICONE_RETARDATION_TIME,
@@ -57,7 +58,7 @@ from .solvers.records import ContactReport, RodState, StepResult, put_grippers, 
 __all__ = [
     "ELASTOSIL_MA_4601", "SILICONE_RETARDATION_TIME", "SOFT_TRANSLUCENT_SILICONE", "FingerDesign", "GripperDesign",
     "Material", "linear_taper", "without_material_damping",
-    "paper_finger", "Discretization", "WATER", "WATER_DENSITY", "WATER_VISCOSITY", "Current", "Fluid",
+    "paper_finger", "Discretization", "WATER", "WATER_DENSITY", "WATER_VISCOSITY", "Current", "current_at", "Fluid",
     "PAPER_DEFECTIVE_DRAG", "AddedMass", "BodyLoads", "Buoyancy", "ForceModel", "Gravity", "MassProportionalDamping",
     "MorisonDrag", "StokesDrag", "fluid_forces", "PAPER_BALL", "PENETRATION_TOLERANCE", "DEFAULT_FRICTION", "Capsule",
     "PENETRATION_ACCELERATION", "penetration_tolerance",

@@ -19,13 +19,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .kernels.assembly import N_DESIGN_FIELDS, RodArrays, StepInputs, assemble
-from .kernels.body import BodyArrays, BodyMotion, BodyState, palm_reactions
+from .kernels.body import N_BODY_ARRAYS, BodyArrays, BodyMotion, BodyState, palm_reactions
 from .kernels.contact import contact_reactions, object_in_rod_frames
+from .kernels.current import CurrentBatch
 from .kernels.finger_contact import FingerContact, find_near_fingers, finger_scratch
 from .kernels.forces import rod_water_velocity
 from .kernels.rod_3d import elastic_scratch, rod3d_elastic, rod3d_update_frames
 from .kernels.rod_planar import planar_elastic
-from .scene.fluid import Current, CurrentBatch
+from .scene.fluid import Current
 from .scene.forces import BodyLoads, ForceTerms
 from .scene.objects import ContactSettings, penetration_tolerance
 from .scene.scene import NATURAL_CURVATURE_LIMIT, Scene
@@ -38,6 +39,7 @@ from .solvers.newton import (
     SolveResult,
     advance_rods,
     finish,
+    for_one_gripper,
     midpoint_end,
     per_gripper,
     plain,
@@ -55,7 +57,7 @@ from .solvers.records import (
     record,
     take_grippers,
 )
-from .solvers.stepping import Interval, WorkingState, commit_step, take_steps
+from .solvers.stepping import N_ROD_FIELDS, Interval, WorkingState, commit_step, take_steps
 
 
 class BodyModel:
@@ -220,6 +222,8 @@ class Simulator:
         moving_water = self._force_terms.drag_normal.size > 0 or (body_loads is not None and (
             body_loads.sphere_drag > 0 or body_loads.froude_krylov > 0 or body_loads.sphere_added_mass > 0))
         self._currents = CurrentBatch(B) if moving_water else None
+        self._kernel_currents = tuple((self._currents or CurrentBatch(B)).arrays)
+        """The currents as the compiled steps take them: still water's zeros where the water moves nothing."""
         self._water_cache: tuple[float, tuple[np.ndarray, np.ndarray] | None] = (math.nan, None)
         if not moving_water:
             still = np.zeros((B, 3))
@@ -366,7 +370,8 @@ class Simulator:
         no gripper runs; the batch's time is that of the last step taken.
 
         With an object, the steps run in one compiled call (:func:`~.solvers.stepping.take_steps`), leaving it only
-        for a step that needs halving, so a control interval costs one call instead of one per step."""
+        for a step that a gripper of a batch of several needs halved (a batch of one halves it in the call), so a
+        control interval costs one call instead of one per step."""
         B, F, R = self.batch_size, self.n_fingers, self.n_rods
         if not isinstance(n_steps, (int, np.integer)) or not 1 <= n_steps <= 1_000_000:
             raise ValueError(f"Simulator.advance: n_steps = {n_steps!r} (count) is outside the allowed range "
@@ -393,7 +398,7 @@ class Simulator:
         if self._gpu is not None:
             return self._advance_on_gpu(work, interval, times, n_steps)
         if self._has_object:
-            water = np.zeros((n_steps + 1, B, 3)) if self._currents is None else self._currents.at_times(times)
+            step_times = np.array(times)
             rods = self._plain_rods if work.tangent.size == 0 else \
                 self._plain_rods[:N_DESIGN_FIELDS] + (work.tangent, work.director, work.reference_twist)
             body = None if self._body is None else self._body.plain_arrays
@@ -402,10 +407,10 @@ class Simulator:
                 self._adaptive_step(work, times[k], dt, interval)
                 k += 1
                 continue
-            k = take_steps(k, n_steps, dt, water, work, rods, self._plain_terms, self._per_step(dt),
-                           self._plain_geometry, self._projection, body, interval)
+            k = take_steps(k, n_steps, dt, step_times, self._kernel_currents, work, rods, self._plain_terms,
+                           self._halving_levels(dt), self._plain_geometry, self._projection, body, interval)
             if interval.pending.any():  # the others took step k; it is halved for the grippers left pending
-                self._halve_pending(work, times[k], dt, interval, np.nonzero(interval.pending)[0])
+                self._halve_pending(work, interval, k, dt, step_times, body, np.nonzero(interval.pending)[0])
                 k += 1
             elif k < n_steps and interval.running.any():
                 raise RuntimeError(f"take_steps stopped at step {k} of {n_steps} with grippers running and none "
@@ -426,36 +431,25 @@ class Simulator:
         if self._has_object:
             shape = GraspKernelShape(self.n_fingers, disc.n_nodes, disc.stride, disc.dim, finger_contact,
                                      self._body is not None)
-            return self._plain_rods, self._plain_terms, solver, self._projection, shape
+            return (self._plain_rods, self._plain_terms, self._halving_levels(self.scene.time_step), self._projection,
+                    shape)
         shape = RodsKernelShape(self.n_fingers, disc.n_nodes, disc.stride, disc.dim, finger_contact)
         return self._plain_rods, self._plain_terms, solver, disc.finger_directions, shape
 
     def _advance_on_gpu(self, work: WorkingState, interval: Interval, times: list[float], n_steps: int) -> Advance:
         """:meth:`advance`'s steps on the GPU, from and into ``work`` and ``interval``. With an object
-        (:class:`~.solvers.gpu.GpuGrasp`), a step that a gripper does not settle is halved here on the CPU, as
-        :meth:`advance` halves it, and the gripper goes on from the next step on the GPU. Rods on their own
-        (:class:`~.solvers.gpu.GpuRods`): a failed step is not halved (the gripper stops there)."""
+        (:class:`~.solvers.gpu.GpuGrasp`), a step that a gripper does not settle is halved in its thread, as
+        :meth:`advance` halves it. Rods on their own (:class:`~.solvers.gpu.GpuRods`): a failed step is not halved
+        (the gripper stops there)."""
         B, F, N = self.batch_size, self.n_fingers, self.disc.n_nodes
         dt = self.scene.time_step
-        water = np.zeros((n_steps + 1, B, 3)) if self._currents is None else self._currents.at_times(times)
         if isinstance(self._gpu, GpuGrasp):
             body = None if self._body is None else self._body.plain_arrays
-            first_steps = np.zeros(B, dtype=np.int64)
-            stopped = np.full(B, n_steps)  # the step where each gripper stopped: the batch's time is the last's
-            while True:
-                stops = self._gpu.advance(tuple(work), self._plain_geometry, body, tuple(interval), water,
-                                          first_steps, dt, n_steps)
-                resumed = first_steps < n_steps
-                stopped[resumed] = stops[resumed]
-                pending = np.nonzero(interval.pending)[0]
-                if not pending.size:
-                    break
-                for k in np.unique(stops[pending]):  # each gripper's unsettled step, halved
-                    self._halve_pending(work, times[k], dt, interval, pending[stops[pending] == k])
-                first_steps = np.full(B, n_steps)
-                first_steps[pending] = stops[pending] + 1
-            taken = int(stopped.max())
+            stops = self._gpu.advance(tuple(work), self._plain_geometry, body, tuple(interval), np.array(times),
+                                      self._kernel_currents, dt, n_steps)
+            taken = int(stops.max())  # the step where each gripper stopped: the batch's time is the last's
         else:
+            water = np.zeros((n_steps + 1, B, 3)) if self._currents is None else self._currents.at_times(times)
             clock_before = interval.clock.copy()
             self._gpu.advance((work.q, work.velocity, work.acceleration, work.tangent, work.director,
                                work.reference_twist), water, interval.natural_curvature, interval.curvature_rate,
@@ -476,17 +470,32 @@ class Simulator:
         self._commit(np.arange(self.batch_size), result.converged & finite(result.state), result.newton_iterations,
                      result, dt, work, interval)
 
-    def _halve_pending(self, work: WorkingState, time: float, dt: float, interval: Interval,
-                       grippers: np.ndarray) -> None:
-        """The step at ``time`` [s] of :meth:`advance` for ``grippers``, which the compiled steps left pending: two
-        half steps, each halved again as the adaptive path allows (:meth:`_halves`), committed into ``work`` and
-        ``interval``."""
-        interval.pending[grippers] = False
-        natural_curvature = interval.natural_curvature.reshape(self.batch_size, -1)[grippers].ravel()
-        sub, first, second = self._halves(take_grippers(self._state_of(work, time), grippers), grippers,
-                                          natural_curvature, dt, self.scene.newton.max_step_halvings)
-        sub._commit(grippers, first.converged & second.converged & finite(second.state),
-                    first.newton_iterations + second.newton_iterations, second, dt, work, interval)
+    def _halve_pending(self, work: WorkingState, interval: Interval, k: int, dt: float, step_times: np.ndarray,
+                       body: tuple | None, grippers: np.ndarray) -> None:
+        """Step ``k`` of :meth:`advance` (of ``dt`` [s], from the batch time ``step_times[k]``) for ``grippers``,
+        which the compiled steps left pending: each takes it in halves as a batch of one, through the same compiled
+        steps on views of its rows of ``work`` and ``interval``, which it updates."""
+        F = self.n_fingers
+        solvers = tuple(for_one_gripper(solver, F) for solver in self._halving_levels(dt))
+        projection = self._projection[:F]
+        for b in grippers:
+            rods, one = slice(b * F, (b + 1) * F), slice(b, b + 1)
+            state = WorkingState(*(x[rods] for x in work[:N_ROD_FIELDS]), *(x[one] for x in work[N_ROD_FIELDS:]))
+            rod_arrays = self._plain_rods if state.tangent.size == 0 else \
+                self._plain_rods[:N_DESIGN_FIELDS] + (state.tangent, state.director, state.reference_twist)
+            starts, ends, radii, finger_radius, friction, directions, plane_normals, any_motion = \
+                self._plain_geometry
+            geometry = (starts[rods], ends[rods], radii[rods], finger_radius, friction[rods], directions,
+                        plane_normals, any_motion[one])
+            own_body = None if body is None else tuple(x[one] for x in body[:N_BODY_ARRAYS]) + body[N_BODY_ARRAYS:]
+            own = interval._replace(natural_curvature=interval.natural_curvature[rods],
+                                    curvature_rate=interval.curvature_rate[rods], running=interval.running[one],
+                                    failed=interval.failed[one], clock=interval.clock[one],
+                                    newton_iterations=interval.newton_iterations[one],
+                                    normal_impulse=interval.normal_impulse[rods], impulse=interval.impulse[rods],
+                                    pending=interval.pending[one])
+            take_steps(k, k + 1, dt, step_times, tuple(x[one] for x in self._kernel_currents), state, rod_arrays,
+                       self._plain_terms, solvers, geometry, projection, own_body, own)
 
     def _commit(self, grippers: np.ndarray, ok: np.ndarray, iterations: np.ndarray, result: StepResult, dt: float,
                 work: WorkingState, interval: Interval) -> None:
@@ -547,7 +556,7 @@ class Simulator:
             return result
         failed = np.nonzero(~settled)[0]  # a corrector that spent its budget is retried in halves too
         sub_natural_curvature = natural_curvature.reshape(self.batch_size, -1)[failed].ravel()
-        _, first, second = self._halves(take_grippers(state, failed), failed, sub_natural_curvature, dt, halvings)
+        first, second = self._halves(take_grippers(state, failed), failed, sub_natural_curvature, dt, halvings)
         merged = evolve(put_grippers(result.state, failed, second.state), time=result.state.time)
         contact = result.contact
         if contact is not None:
@@ -561,14 +570,14 @@ class Simulator:
                           contact=contact, substeps=_set(result.substeps, failed, first.substeps + second.substeps))
 
     def _halves(self, state: RodState, grippers: np.ndarray, natural_curvature: np.ndarray, dt: float,
-                halvings: int) -> tuple[Simulator, StepResult, StepResult]:
+                halvings: int) -> tuple[StepResult, StepResult]:
         """A step of ``dt`` [s] for this batch's ``grippers`` from ``state`` (theirs alone) with κ̄ per rod, taken
-        as two half steps, each of which may be halved again while ``halvings`` − 1 allows: the simulator of those
-        grippers and the two halves' results."""
+        as two half steps, each of which may be halved again while ``halvings`` − 1 allows: the two halves'
+        results."""
         sub = self._subsimulator(grippers)
         first = sub._step_adaptive(state, natural_curvature, 0.5 * dt, halvings - 1)
         second = sub._step_adaptive(first.state, natural_curvature, 0.5 * dt, halvings - 1)
-        return sub, first, second
+        return first, second
 
     def _subsimulator(self, grippers: np.ndarray) -> Simulator:
         """A simulator of the scenes of ``grippers`` (indices), kept for reuse by their count."""
@@ -701,6 +710,15 @@ class Simulator:
                 force_tolerance=float(force_tolerance), finger_length=float(length),
                 penetration_tolerance=penetration_tolerance(dt)))
         return self._per_step_cache[dt]
+
+    def _halving_levels(self, dt: float) -> tuple:
+        """:meth:`_per_step`'s settings for steps of ``dt``, ``dt``/2, … [s], one for each level of halving that the
+        scene allows (``NewtonSettings.max_step_halvings``) and one more, as the compiled steps take them."""
+        levels, h = [], dt
+        for _ in range(self.scene.newton.max_step_halvings + 1):
+            levels.append(self._per_step(h))
+            h *= 0.5  # as the adaptive path halves: 0.5·dt, 0.5·(0.5·dt), …
+        return tuple(levels)
 
     def implicit_step(self, state: RodState, natural_curvature: np.ndarray, dt: float, velocity_old: np.ndarray,
                       midpoint: bool = False) -> StepResult:

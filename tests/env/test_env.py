@@ -24,7 +24,7 @@ from soft_gripper_env.env import (
     observation_slices,
 )
 from soft_gripper_env.grasp_task import MODEL_DEFAULTS, GraspTask
-from soft_gripper_env.physics import PAPER_BALL, NewtonSettings, paper_scene, run_ramp
+from soft_gripper_env.physics import PAPER_BALL, NewtonSettings, current_at, paper_scene, run_ramp
 from soft_gripper_env.physics import simulator as simulator_module
 
 SUCCESS_SEED = 2
@@ -217,21 +217,17 @@ def test_gymnasium_async_vector_env_matches_the_sync_one():
 
 
 def test_solver_failure_truncates_and_keeps_the_last_good_state(env, monkeypatch):
+    """A gripper whose step fails (its halvings spent) stops with the state before that step, as the compiled steps
+    leave it (tests/physics/test_advance.py); the env then truncates the episode and reports the failure."""
     obs, _ = env.reset(seed=2)
-    real_step = simulator_module.Simulator._step_adaptive
 
-    def failing(self, state, kbar, dt, halvings):  # the adaptive path, halvings spent, leaves the state not finite
-        result = real_step(self, state, kbar, dt, halvings)
-        return replace(result, converged=np.zeros_like(result.converged),
-                       state=replace(result.state, q=np.full_like(result.state.q, np.nan)))
-
-    def unsettled(first, *arguments):  # every running gripper leaves the first step to the adaptive path
+    def failing(first, *arguments):  # every running gripper fails its first step
         interval = arguments[-1]
-        interval.pending[:] = interval.running
+        interval.failed[:] = interval.running
+        interval.running[:] = False
         return first
 
-    monkeypatch.setattr(simulator_module, "take_steps", unsettled)
-    monkeypatch.setattr(simulator_module.Simulator, "_step_adaptive", failing)
+    monkeypatch.setattr(simulator_module, "take_steps", failing)
     after, reward, terminated, truncated, info = env.step(np.zeros(3))
     assert truncated and not terminated and info["solver_failure"]
     np.testing.assert_array_equal(after, obs)
@@ -396,7 +392,7 @@ def test_reset_options_fix_the_scene(env):
         current = scene.fluid.current
         assert current.gust_velocity == (0.0, 0.1, 0.0) and current.gust_start == 2.2
         # the gust at its peak, on top of the mean current
-        np.testing.assert_allclose(current.at(2.2 + task.gust_duration / 2), [0.01, 0.1, 0.0], atol=1e-12)
+        np.testing.assert_allclose(current_at(current, 2.2 + task.gust_duration / 2), [0.01, 0.1, 0.0], atol=1e-12)
 
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -19,6 +19,7 @@ from soft_gripper_env.physics import (
     MorisonDrag,
     Simulator,
     Sphere,
+    current_at,
     paper_scene,
 )
 
@@ -345,7 +346,8 @@ def test_a_sphere_in_an_accelerating_current_follows_morisons_inertia_exactly(de
     sinking = (density - WATER_DENSITY) * 9.81 / (density + added * WATER_DENSITY)
     for _ in range(60):
         state = sim.step(state, 0.0).state
-    expected = gain * (current.at(state.time) - current.at(0.0)) - np.array([0.0, 0.0, sinking * state.time])
+    expected = gain * (current_at(current, state.time) - current_at(current, 0.0)) \
+        - np.array([0.0, 0.0, sinking * state.time])
     np.testing.assert_allclose(state.body_velocity[0], expected, rtol=0, atol=1e-12)
     assert np.abs(expected[:2]).max() > 0.01  # the current moved it
 

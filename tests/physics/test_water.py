@@ -28,6 +28,7 @@ from soft_gripper_env.physics import (
     paper_scene,
     run_ramp,
 )
+from soft_gripper_env.physics.kernels.current import CurrentBatch, current_at
 
 CURRENT = Current(velocity=(0.05, -0.12, 0.03), oscillation=(0.02, 0.0, 0.01), period=0.7)
 
@@ -225,14 +226,14 @@ def test_bad_water_parameters_raise(make, pattern):
 
 def test_current_phase_and_each_grippers_clock():
     current = Current(velocity=(0.1, 0.0, 0.0), oscillation=(0.0, 0.2, 0.0), period=2.0, phase=0.5)
-    np.testing.assert_allclose(current.at(0.25), [0.1, 0.2 * math.sin(2 * math.pi * 0.125 + 0.5), 0.0], rtol=1e-15)
-    from soft_gripper_env.physics.scene.fluid import CurrentBatch
-
+    np.testing.assert_allclose(current_at(current, 0.25), [0.1, 0.2 * math.sin(2 * math.pi * 0.125 + 0.5), 0.0],
+                               rtol=1e-15)
     batch = CurrentBatch.of([current, current])
-    np.testing.assert_allclose(batch.at(1.0)[1], current.at(1.0), rtol=1e-15)  # remembered, then forgotten below
+    # remembered, then forgotten below
+    np.testing.assert_allclose(batch.at(1.0)[1], current_at(current, 1.0), rtol=1e-15)
     batch.set_clock(1, 0.75)  # gripper 1's episode began at batch time 0.75 s
-    np.testing.assert_allclose(batch.at(1.0)[1], current.at(0.25), rtol=1e-14)
-    np.testing.assert_allclose(batch.at(1.0)[0], current.at(1.0), rtol=1e-15)
+    np.testing.assert_allclose(batch.at(1.0)[1], current_at(current, 0.25), rtol=1e-14)
+    np.testing.assert_allclose(batch.at(1.0)[0], current_at(current, 1.0), rtol=1e-15)
     batch.load(0, Current(velocity=(0.3, 0.0, 0.0)))  # a new current is not read from memory either
     np.testing.assert_allclose(batch.at(1.0)[0], [0.3, 0.0, 0.0], rtol=1e-15)
 
@@ -270,12 +271,10 @@ def test_a_gust_is_a_smooth_pulse_on_the_current_and_runs_on_each_grippers_clock
     for t in (1.9, 2.0, 2.1, 2.25, 2.4, 2.5, 2.6):
         inside = 2.0 <= t <= 2.5
         expected = np.array([0.01, 0.12 * np.sin(np.pi * (t - 2.0) / 0.5) ** 2 if inside else 0.0, 0.0])
-        np.testing.assert_allclose(gust.at(t), expected, atol=1e-15)
+        np.testing.assert_allclose(current_at(gust, t), expected, atol=1e-15)
     for edge in (2.0, 2.5):  # no jump in the acceleration at either end
-        slope = (gust.at(edge + 1e-6) - gust.at(edge - 1e-6)) / 2e-6
+        slope = (current_at(gust, edge + 1e-6) - current_at(gust, edge - 1e-6)) / 2e-6
         assert abs(slope[1]) < 1e-4
-    from soft_gripper_env.physics.scene.fluid import CurrentBatch
-
     batch = CurrentBatch.of((gust, gust, Current()))
     batch.set_clock(1, 1.0)  # gripper 1's episode began at batch time 1 s
     at = batch.at(2.25)

@@ -25,6 +25,7 @@ from ..scene.discretization import Discretization
 from ..scene.fluid import Fluid
 from ..scene.forces import ForceModel, ForceTerms
 from .compiled import kernel
+from .current import current_at
 from .finger_contact import FingerContact, any_near, finger_contact_rod, finger_scratch
 from .forces import added_mass, linear_damping, morison_drag, rod_water_velocity
 from .rod_3d import elastic_scratch, rod3d_elastic_rod
@@ -214,7 +215,7 @@ def evaluate_force(model: ForceModel, disc: Discretization, fluid: Fluid, ctx: S
     whose current is evaluated at ``ctx.time``. Arrays (R, N, D) [m, m/s, m/s², N] as in
     :class:`~..scene.discretization.Discretization`, ``system_band`` (R, n, kd+1)."""
     n_grippers = positions.shape[0] // len(disc.finger_directions)
-    water = rod_water_velocity(disc, np.tile(fluid.current.at(ctx.time), (n_grippers, 1)))
+    water = rod_water_velocity(disc, np.tile(current_at(fluid.current, ctx.time), (n_grippers, 1)))
     external_forces(positions, ctx.start_positions, velocities, accelerations, water,
                     ForceTerms.of(disc, (model,), fluid), ctx.velocity_derivative, ctx.acceleration_derivative,
                     disc.stride, force, system_band)

@@ -89,6 +89,10 @@ class BodyArrays(NamedTuple):
     """μ between the palm and the body (dimensionless)."""
 
 
+N_BODY_ARRAYS = BodyArrays._fields.index("palm_stiffness")
+"""How many of :class:`BodyArrays`' fields are per-body arrays (the palm's numbers follow them)."""
+
+
 class BodyState(NamedTuple):
     """The bodies' state at one instant (the start of a step)."""
 
@@ -460,5 +464,5 @@ def body_in_rod_frames(c, orientation, segment_start, segment_end, radius, finge
                     radii[r, i] = math.sqrt(max((radius[b] + finger_radius[i]) ** 2 - across**2, 0.0))
 
 
-__all__ = ["BodyArrays", "BodyState", "BodyMotion", "palm_reactions", "body_residual", "turned", "admissible_rotation",
-           "planar_body_basis", "body_in_rod_frames"]
+__all__ = ["BodyArrays", "N_BODY_ARRAYS", "BodyState", "BodyMotion", "palm_reactions", "body_residual", "turned",
+           "admissible_rotation", "planar_body_basis", "body_in_rod_frames"]

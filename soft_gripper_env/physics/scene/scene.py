@@ -40,6 +40,10 @@ curvature κ = 2·tan(φ/2) is singular at φ = 180°, and a finger already curl
 same clip as dismech-rl's."""
 
 
+STEP_HALVINGS_LIMIT = 20
+"""The largest :attr:`NewtonSettings.max_step_halvings` allowed (a step in 2²⁰ substeps)."""
+
+
 @dataclass(frozen=True)
 class NewtonSettings:
     """Stopping rule of Newton's method inside each implicit step."""
@@ -58,9 +62,10 @@ class NewtonSettings:
         if not isinstance(self.max_iterations, (int, np.integer)) or not 1 <= self.max_iterations <= 1000:
             raise ValueError(f"NewtonSettings.max_iterations = {self.max_iterations!r} is outside the allowed "
                              f"range [1, 1000] (integer count)")
-        if not isinstance(self.max_step_halvings, (int, np.integer)) or not 0 <= self.max_step_halvings <= 20:
-            raise ValueError(f"NewtonSettings.max_step_halvings = {self.max_step_halvings!r} is outside the allowed "
-                             f"range [0, 20] (integer count)")
+        halvings = self.max_step_halvings
+        if not isinstance(halvings, (int, np.integer)) or not 0 <= halvings <= STEP_HALVINGS_LIMIT:
+            raise ValueError(f"NewtonSettings.max_step_halvings = {self.max_step_halvings!r} is outside the "
+                             f"allowed range [0, {STEP_HALVINGS_LIMIT}] (integer count)")
 
 
 @dataclass(frozen=True)
@@ -161,5 +166,5 @@ def cantilever_scene(n_nodes: int = 20, clamp: ClampConvention = "accurate", mod
                  natural_curvature_rate=0.0)
 
 
-__all__ = ["RodModel", "Integrator", "INTEGRATOR_NAMES", "NATURAL_CURVATURE_LIMIT", "NewtonSettings", "Scene",
-           "Medium", "paper_scene", "cantilever_scene", "replace"]
+__all__ = ["RodModel", "Integrator", "INTEGRATOR_NAMES", "NATURAL_CURVATURE_LIMIT", "STEP_HALVINGS_LIMIT",
+           "NewtonSettings", "Scene", "Medium", "paper_scene", "cantilever_scene", "replace"]

@@ -42,13 +42,15 @@ from numba.core import types
 
 from ..kernels.assembly import FINGERS_FIELD, N_DESIGN_FIELDS, StepInputs, named_rods
 from ..kernels.compiled import kernel
+from ..kernels.current import CurrentBatch
 from ..kernels.finger_contact import finger_scratch_size
 from ..kernels.forces import project_water
 from ..kernels.local import local_array
 from ..kernels.rod_3d import elastic_scratch_size, elastic_views, rod_frames
 from ..scene.forces import ForceTerms
+from ..scene.scene import STEP_HALVINGS_LIMIT
 from .corrector import CorrectorWork
-from .newton import NewtonWork, SolverArrays, SolveResult, step_gripper_rods
+from .newton import NewtonWork, SolverArrays, SolveResult, for_one_gripper, step_gripper_rods
 from .stepping import Interval, StepWork, WorkingState, step_batch
 
 THREADS_PER_BLOCK = 64
@@ -431,11 +433,11 @@ def grasp_kernel(shape: GraspKernelShape):
     arrays. Its arguments are tuples (a tuple reaches the simulator's threads as the host's arrays):
     ``state`` the :class:`~.stepping.WorkingState`'s fields; ``rods`` the design's fields of
     :class:`~..kernels.assembly.RodArrays`; ``terms`` the :class:`~..scene.forces.ForceTerms`' fields; ``solver``
-    the :class:`~.newton.SolverArrays`' fields for one gripper's F rods; ``geometry`` = (the
-    :class:`~.corrector.ContactGeometry`'s fields, the projection (F, D, 3)); ``body`` the
-    :class:`~..kernels.body.BodyArrays`' fields (a placeholder for a fixed object); ``interval`` the
-    :class:`~.stepping.Interval`'s fields; ``timing`` = (gripper water (B, K + 1, 1, 3) [m/s], each gripper's
-    first step (B,) int, where each stopped (B,) int, written, dt [s], K)."""
+    the :class:`~.newton.SolverArrays`' fields for one gripper's F rods, at each level of halving (steps of dt,
+    dt/2, …); ``geometry`` = (the :class:`~.corrector.ContactGeometry`'s fields, the projection (F, D, 3)); ``body``
+    the :class:`~..kernels.body.BodyArrays`' fields (a placeholder for a fixed object); ``interval`` the
+    :class:`~.stepping.Interval`'s fields; ``timing`` = (the steps' times (K + 1,) [s], the currents'
+    :class:`~..kernels.current.CurrentArrays` fields, where each gripper stopped (B,) int, written, dt [s], K)."""
     return _compiled(shape, _build_grasp_kernel)
 
 
@@ -454,15 +456,16 @@ def _build_grasp_kernel(shape: GraspKernelShape):
     contact_fingers = F if shape.finger_contact else 0
     elastic_size = elastic_scratch_size(N if three_d else 0)
     finger_size = finger_scratch_size(contact_fingers, N)
+    levels = STEP_HALVINGS_LIMIT + 1  # of halving: each level's half step's start time
     float64, int64, boolean = types.float64, types.int64, types.boolean
 
     @cuda.jit
-    def grasp_interval(state, rods_design, terms, solver, geometry_projection, body, interval, timing):
+    def grasp_interval(state, rods_design, terms, solvers, geometry_projection, body, interval, timing):
         b = cuda.grid(1)
         running = interval[4]
         if b >= running.shape[0]:
             return
-        gripper_water, first_steps, stops, dt, n_steps = timing
+        times, currents, stops, dt, n_steps = timing
         first = b * F
         last = first + F
         q, velocity, acceleration, held, hold_offset, tangent, director, twist, position, body_velocity, \
@@ -507,6 +510,15 @@ def _build_grasp_kernel(shape: GraspKernelShape):
                            cuda.local.array((F, N), float64)[:framed],
                            cuda.local.array((1, 3), float64)[:bodies], cuda.local.array((1, 3), float64)[:bodies],
                            cuda.local.array((1, 3, 3), float64)[:bodies], cuda.local.array((1, 3), float64)[:bodies])
+        saved = WorkingState(cuda.local.array((F, N, S), float64), cuda.local.array((F, N, S), float64),
+                             cuda.local.array((F, N, S), float64), cuda.local.array((F, N), boolean),
+                             cuda.local.array((F, N, 3), float64)[:held_by_body],
+                             cuda.local.array((F, edges, 3), float64)[:framed],
+                             cuda.local.array((F, edges, 3), float64)[:framed],
+                             cuda.local.array((F, N), float64)[:framed],
+                             cuda.local.array((1, 3), float64)[:bodies], cuda.local.array((1, 3), float64)[:bodies],
+                             cuda.local.array((1, 3, 3), float64)[:bodies],
+                             cuda.local.array((1, 3), float64)[:bodies])
         rod_steps = cuda.local.array((2, F, n), float64)  # x0 and the rods' last steps
         for f in range(F):
             for j in range(n):
@@ -533,14 +545,18 @@ def _build_grasp_kernel(shape: GraspKernelShape):
                                   cuda.local.array((1, 6, 6), float64)[:1 if planar_free else 0], newton)
         gripper = cuda.local.array(1, int64)
         gripper[0] = 0
-        work = StepWork(cuda.local.array((F, N, S), float64), new, cuda.local.array((F, D), float64),
+        work = StepWork(cuda.local.array((F, N, S), float64), new, saved,
+                        cuda.local.array(levels, float64), cuda.local.array((1, 3), float64),
+                        cuda.local.array((F, D), float64),
                         cuda.local.array((1, 3), float64), cuda.local.array((F, N, F), int64)[:contact_fingers],
                         node_flags[5], points[2], cuda.local.array((F, n), boolean), points[3], flags[6], flags[7],
                         counts[1], counts[2], ratios[2], cuda.local.array((F, n), float64),
                         cuda.local.array((F, N, 3), float64), cuda.local.array((F, N), float64),
                         cuda.local.array(1, boolean), cuda.local.array(1, int64), gripper, corrector)
-        stops[b] = step_batch(first_steps[b], n_steps, dt, gripper_water[b], own, rods, terms, solver,
-                              own_geometry, projection, own_body, own_interval, work)
+        own_currents = (currents[0][b:b + 1], currents[1][b:b + 1], currents[2][b:b + 1], currents[3][b:b + 1],
+                        currents[4][b:b + 1], currents[5][b:b + 1], currents[6][b:b + 1], currents[7][b:b + 1])
+        stops[b] = step_batch(0, n_steps, dt, times, own_currents, own, rods, terms, solvers, own_geometry,
+                              projection, own_body, own_interval, work)
 
     return grasp_interval
 
@@ -548,28 +564,26 @@ def _build_grasp_kernel(shape: GraspKernelShape):
 class GpuGrasp:
     """Grippers grasping an object, stepped on the GPU: the batch's constants on the device, and :meth:`advance`.
 
-    ``rods``, ``terms``, ``solver``, ``geometry`` and ``projection`` are the plain fields the CPU's
-    :func:`~.stepping.take_steps` takes, ``body`` the free bodies' (None for a fixed object). The object's place
-    and friction (``geometry``) and the bodies' constants are copied at every :meth:`advance`, since a new episode
-    changes them. With ``host`` the arrays stay the host's and no GPU is needed (for :func:`grasp_ptx`)."""
+    ``rods``, ``terms``, ``solvers`` (one per level of halving), ``geometry`` and ``projection`` are the plain fields
+    the CPU's :func:`~.stepping.take_steps` takes, ``body`` the free bodies' (None for a fixed object). The object's
+    place and friction (``geometry``), the bodies' constants and the currents are copied at every :meth:`advance`,
+    since a new episode changes them. With ``host`` the arrays stay the host's and no GPU is needed (for
+    :func:`grasp_ptx`)."""
 
-    def __init__(self, rods: tuple, terms: tuple, solver: tuple, projection: np.ndarray, shape: GraspKernelShape,
+    def __init__(self, rods: tuple, terms: tuple, solvers: tuple, projection: np.ndarray, shape: GraspKernelShape,
                  host: bool = False) -> None:
         self.cuda = None if host else cuda_module()
         self.shape = shape
         F = shape.n_fingers
         self.rods = _on_device(self.cuda, rods[:N_DESIGN_FIELDS])
         self.terms = _on_device(self.cuda, terms)
-        solver_arrays = SolverArrays(*solver)
-        one_gripper = solver_arrays._replace(tolerance_inverse=solver_arrays.tolerance_inverse[:F],
-                                             clamp_free=solver_arrays.clamp_free[:F])
-        self.solver = _on_device(self.cuda, tuple(one_gripper))
+        self.solvers = _on_device(self.cuda, tuple(for_one_gripper(solver, F) for solver in solvers))
         self.projection = _on_device(self.cuda, projection[:F])
 
-    def arguments(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, gripper_water: np.ndarray,
-                  first_steps: np.ndarray, stops: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, list, list]:
+    def arguments(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, times: np.ndarray,
+                  currents: tuple, stops: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, list, list]:
         """The kernel's arguments, and the host arrays it writes with their device copies."""
-        n_grippers = first_steps.shape[0]
+        n_grippers = stops.shape[0]
         written = [*state, *(interval[i] for i in _INTERVAL_WRITTEN), stops]
         device = [_on_device(self.cuda, x) for x in written]
         n_state = len(state)
@@ -578,27 +592,26 @@ class GpuGrasp:
                            for i, x in enumerate(interval)]
         if body is None:  # a fixed object: a placeholder the kernel does not read
             body = tuple(np.zeros(n_grippers) for _ in range(14)) + (0.0, 0.0, 0.0, 0.0)
-        arguments = (tuple(device[:n_state]), self.rods, self.terms, self.solver,
+        arguments = (tuple(device[:n_state]), self.rods, self.terms, self.solvers,
                      (_on_device(self.cuda, tuple(geometry)), self.projection),
                      _on_device(self.cuda, tuple(body)),
                      tuple(device_interval),
-                     (_on_device(self.cuda, _per_gripper(gripper_water)),
-                      _on_device(self.cuda, np.ascontiguousarray(first_steps, dtype=np.int64)), device[-1],
-                      float(dt),
-                      int(n_steps)))
+                     (_on_device(self.cuda, np.ascontiguousarray(times, dtype=float)),
+                      _on_device(self.cuda, tuple(currents)), device[-1], float(dt), int(n_steps)))
         return arguments, written, device
 
-    def advance(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, gripper_water: np.ndarray,
-                first_steps: np.ndarray, dt: float, n_steps: int) -> np.ndarray:
-        """Takes steps ``first_steps[b]`` … ``n_steps`` − 1 of ``dt`` [s] of every running gripper b, as
-        :func:`~.stepping.take_steps` takes them on the CPU, with the current ``gripper_water`` (n_steps + 1, B, 3)
-        [m/s]. ``state`` (:class:`~.stepping.WorkingState`'s fields) and ``interval`` (:class:`~.stepping.Interval`'s)
-        are the host's and are updated in place. Returns the step where each gripper stopped (B,): ``n_steps``, the
-        step after a failed one, or a step left ``pending`` for the host to halve."""
-        stops = np.zeros(first_steps.shape[0], dtype=np.int64)
-        arguments, written, device = self.arguments(state, geometry, body, interval, gripper_water, first_steps,
-                                                    stops, dt, n_steps)
-        _launch(grasp_kernel(self.shape), first_steps.shape[0], arguments, written, device)
+    def advance(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, times: np.ndarray,
+                currents: tuple, dt: float, n_steps: int) -> np.ndarray:
+        """Takes ``n_steps`` steps of ``dt`` [s] of every running gripper from the batch times ``times``
+        (n_steps + 1,) [s], as :func:`~.stepping.take_steps` takes them on the CPU, with the water of ``currents``
+        (:class:`~..kernels.current.CurrentArrays`); a step a gripper does not settle is halved in its thread.
+        ``state`` (:class:`~.stepping.WorkingState`'s fields) and ``interval`` (:class:`~.stepping.Interval`'s) are
+        the host's and are updated in place. Returns the step where each gripper stopped (B,): ``n_steps``, or the
+        step after a failed one."""
+        stops = np.zeros(interval[4].shape[0], dtype=np.int64)
+        arguments, written, device = self.arguments(state, geometry, body, interval, times, currents, stops, dt,
+                                                    n_steps)
+        _launch(grasp_kernel(self.shape), stops.shape[0], arguments, written, device)
         return stops
 
 
@@ -615,17 +628,9 @@ def grasp_ptx(constants: tuple, state: tuple, geometry: tuple, body: tuple | Non
     import_cuda()
     gpu = GpuGrasp(*constants, host=True)
     n_grippers = interval[4].shape[0]
-    arguments, _, _ = gpu.arguments(state, geometry, body, interval, np.zeros((2, n_grippers, 3)),
-                                    np.zeros(n_grippers, dtype=np.int64), np.zeros(n_grippers, dtype=np.int64),
-                                    1e-3, 1)
+    arguments, _, _ = gpu.arguments(state, geometry, body, interval, np.zeros(2), CurrentBatch(n_grippers).arrays,
+                                    np.zeros(n_grippers, dtype=np.int64), 1e-3, 1)
     return _ptx(_build_grasp_kernel(constants[-1]), arguments, compute_capability)
-
-
-def _per_gripper(gripper_water: np.ndarray) -> np.ndarray:
-    """The current at every gripper (K + 1, B, 3) [m/s] as the grasp kernel takes it, (B, K + 1, 1, 3): each thread's
-    own (K + 1, 1, 3) is then contiguous, as the CPU's whole batch is. A strided one would be another type, another
-    specialisation of :func:`~.stepping.step_batch` to compile for the simulator's threads (about 50 s each)."""
-    return np.ascontiguousarray(np.asarray(gripper_water, dtype=float).transpose(1, 0, 2)[:, :, None, :])
 
 
 def _on_device(cuda, value, placeholder: bool = True):

@@ -140,6 +140,14 @@ class BodyCoupling(NamedTuple):
     """The bodies' admissible motions, (B, 6, 6) (zero columns unused)."""
 
 
+def for_one_gripper(solver: tuple, n_fingers: int) -> tuple:
+    """A batch's solver fields (:class:`SolverArrays`, plain) cut to one gripper's ``n_fingers`` rods: a batch of
+    one taken out of it (each gripper's rods have the same settings)."""
+    fields = SolverArrays(*solver)
+    return tuple(fields._replace(tolerance_inverse=fields.tolerance_inverse[:n_fingers],
+                                 clamp_free=fields.clamp_free[:n_fingers]))
+
+
 MAX_STEP_HALVINGS = 6
 """How often the coupled Newton solve may halve a step that made its residual worse (a backtracking line search)."""
 
@@ -938,6 +946,6 @@ def per_gripper(converged, iterations, ratio, n_fingers):
     return all_converged, most, largest
 
 
-__all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "BodyCoupling", "MAX_STEP_HALVINGS", "NewtonWork",
-           "new_work", "eliminate_rods", "newton", "advance_rods", "step_gripper_rods", "predict", "finish",
-           "midpoint_end", "per_gripper"]
+__all__ = ["SolverArrays", "SolveResult", "Holds", "plain", "for_one_gripper", "BodyCoupling", "MAX_STEP_HALVINGS",
+           "NewtonWork", "new_work", "eliminate_rods", "newton", "advance_rods", "step_gripper_rods", "predict",
+           "finish", "midpoint_end", "per_gripper"]

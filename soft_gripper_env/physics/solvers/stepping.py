@@ -8,11 +8,14 @@ and with the same arithmetic: the predictor, the corrector around Newton's metho
 reactions. Per gripper it sums what a control interval reads (Newton iterations, the impulses of the contact
 reactions) and ramps κ̄ at its rate (:func:`commit_step`).
 
-A gripper that does not settle a step (Newton failed or the corrector spent its budget) is left ``pending`` while
-the others take the step, and the call returns: the simulator halves that step for the pending grippers alone, as
-its adaptive path does, and commits their outcome through the same :func:`commit_step`, then calls
-:func:`take_steps` again for the rest. So a gripper's trajectory does not depend on which path stepped it, nor on
-what else shares its batch.
+A step that a gripper does not settle (Newton failed or the corrector spent its budget) is taken again as two half
+steps, each of which may be halved again, as the simulator's adaptive path does, with the water at each half step's
+time (:func:`~..kernels.current.current_velocity`). A batch of one gripper (a GPU thread's, or one environment's)
+does it right there. A larger batch leaves the gripper ``pending`` while the others take the step, and returns; the
+simulator then gives each pending gripper that step as a batch of one of its own (views of its rows, the same
+compiled function), which takes it in halves, and calls :func:`take_steps` again for the batch from the next step.
+So a gripper's trajectory does not depend on what else shares its batch, and matches the adaptive path of
+``Simulator.step`` to the bit.
 """
 
 from __future__ import annotations
@@ -25,9 +28,11 @@ import numpy as np
 from ..kernels.assembly import FINGERS_FIELD
 from ..kernels.compiled import kernel
 from ..kernels.contact import contact_reactions
+from ..kernels.current import current_velocity
 from ..kernels.forces import project_water
 from ..kernels.rod_3d import rod3d_update_frames
 from ..kernels.typed_none import none_or
+from ..scene.scene import STEP_HALVINGS_LIMIT
 from .corrector import CorrectorWork, correct_contacts, corrector_work
 from .newton import finish, predict
 
@@ -62,6 +67,10 @@ class WorkingState(NamedTuple):
     """[rad/s], (B, 3)."""
 
 
+N_ROD_FIELDS = WorkingState._fields.index("body_position")
+"""How many of :class:`WorkingState`'s fields are per rod (the body's, per gripper, follow them)."""
+
+
 class Interval(NamedTuple):
     """What a run of steps ramps and sums per gripper, in place."""
 
@@ -87,11 +96,12 @@ class Interval(NamedTuple):
     impulse: np.ndarray
     """Σ R·Δt of every node, world frame [N·s], (R, N, 3)."""
     pending: np.ndarray
-    """Running grippers that did not settle the step where :func:`take_steps` returned, (B,) bool: the adaptive path
-    takes that step for them."""
+    """Running grippers of a batch of more than one that did not settle the step where :func:`take_steps` returned,
+    (B,) bool: each takes that step in halves as a batch of one."""
     halve: bool
     """Whether a step that a gripper does not settle is halved (``NewtonSettings.max_step_halvings`` > 0); if not,
-    it is taken as it is when Newton converged (the corrector's budget spent) and fails otherwise."""
+    it is taken as it is when Newton converged (the corrector's budget spent) and fails otherwise. A half step at
+    the deepest level allowed is taken in the same way."""
 
 
 class StepWork(NamedTuple):
@@ -103,6 +113,12 @@ class StepWork(NamedTuple):
     """The predictor [m, rad], (R, N, S)."""
     new: WorkingState
     """The step's end, before it is committed."""
+    saved: WorkingState
+    """A batch of one's state at the start of a step it halves, kept should a half step fail."""
+    level_start: np.ndarray
+    """The start [s] of the (half) step being taken at each level of halving, (STEP_HALVINGS_LIMIT + 1,)."""
+    gripper_water: np.ndarray
+    """The current at each gripper at the step's start [m/s], (B, 3)."""
     water: np.ndarray
     """The current as each rod sees it [m/s], (R, D)."""
     water_acceleration: np.ndarray
@@ -149,12 +165,8 @@ def step_work(state, n_fingers, dim, finger_contact, free_body):
     ``dim`` position coordinates, with or without ``finger_contact``, against a ``free_body`` or a fixed object."""
     n_rods, n_nodes, stride = state.q.shape
     n_grippers = n_rods // n_fingers
-    new = WorkingState(np.empty_like(state.q), np.empty_like(state.q), np.empty_like(state.q),
-                       np.empty_like(state.held), np.empty_like(state.hold_offset), np.empty_like(state.tangent),
-                       np.empty_like(state.director), np.empty_like(state.reference_twist),
-                       np.empty_like(state.body_position), np.empty_like(state.body_velocity),
-                       np.empty_like(state.body_orientation), np.empty_like(state.body_angular_velocity))
-    return StepWork(np.empty_like(state.q), new, np.empty((n_rods, dim)), np.empty((n_grippers, 3)),
+    return StepWork(np.empty_like(state.q), _like(state), _like(state), np.empty(STEP_HALVINGS_LIMIT + 1),
+                    np.empty((n_grippers, 3)), np.empty((n_rods, dim)), np.empty((n_grippers, 3)),
                     np.empty((n_rods, n_nodes, n_fingers) if finger_contact else (0, 0, 0), dtype=np.int64),
                     np.empty((n_rods, n_nodes), dtype=np.bool_), np.empty((n_rods, n_nodes, dim)),
                     np.empty((n_rods, n_nodes * stride), dtype=np.bool_), np.empty((n_rods, n_nodes, dim)),
@@ -165,6 +177,47 @@ def step_work(state, n_fingers, dim, finger_contact, free_body):
                     np.arange(n_grippers), corrector_work(state.q, dim, n_fingers, free_body, finger_contact))
 
 
+@kernel
+def _like(state):
+    """A :class:`WorkingState` of new arrays shaped as ``state``'s."""
+    return WorkingState(np.empty_like(state.q), np.empty_like(state.q), np.empty_like(state.q),
+                        np.empty_like(state.held), np.empty_like(state.hold_offset), np.empty_like(state.tangent),
+                        np.empty_like(state.director), np.empty_like(state.reference_twist),
+                        np.empty_like(state.body_position), np.empty_like(state.body_velocity),
+                        np.empty_like(state.body_orientation), np.empty_like(state.body_angular_velocity))
+
+
+@kernel
+def copy_gripper(source, j, target, b, n_fingers):
+    """Copies gripper ``j``'s state in ``source`` into gripper ``b``'s in ``target`` (both :class:`WorkingState`),
+    element by element: the GPU build copies no array into another by slice."""
+    n_nodes, stride = target.q.shape[1], target.q.shape[2]
+    for f in range(n_fingers):
+        r, s = b * n_fingers + f, j * n_fingers + f
+        for i in range(n_nodes):
+            for k in range(stride):
+                target.q[r, i, k] = source.q[s, i, k]
+                target.velocity[r, i, k] = source.velocity[s, i, k]
+                target.acceleration[r, i, k] = source.acceleration[s, i, k]
+            target.held[r, i] = source.held[s, i]
+            if target.hold_offset.shape[0] > 0:
+                for k in range(3):
+                    target.hold_offset[r, i, k] = source.hold_offset[s, i, k]
+            if target.tangent.shape[0] > 0:
+                target.reference_twist[r, i] = source.reference_twist[s, i]
+                if i < n_nodes - 1:
+                    for k in range(3):
+                        target.tangent[r, i, k] = source.tangent[s, i, k]
+                        target.director[r, i, k] = source.director[s, i, k]
+    if target.body_position.shape[0] > 0:
+        for k in range(3):
+            target.body_position[b, k] = source.body_position[j, k]
+            target.body_velocity[b, k] = source.body_velocity[j, k]
+            target.body_angular_velocity[b, k] = source.body_angular_velocity[j, k]
+            for m in range(3):
+                target.body_orientation[b, k, m] = source.body_orientation[j, k, m]
+
+
 @kernel(python=True)
 def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, state, interval):
     """Takes a step of length ``dt`` [s] into the running grippers ``grippers`` (m,) of ``state``
@@ -173,7 +226,6 @@ def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, st
     (m·F, N, 3) [N] into ``interval`` (:class:`Interval`), ramps their κ̄ and advances their clocks. A running gripper
     that the step did not leave ok stops and fails; a ``pending`` one is left as it is."""
     n_fingers = state.q.shape[0] // interval.running.shape[0]
-    n_nodes, stride = state.q.shape[1], state.q.shape[2]
     for j in range(grippers.shape[0]):
         b = grippers[j]
         if not interval.running[b] or interval.pending[b]:  # stopped, or left for the adaptive path
@@ -182,62 +234,46 @@ def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, st
             interval.running[b] = False
             interval.failed[b] = True
             continue
+        copy_gripper(new, j, state, b, n_fingers)
         for f in range(n_fingers):
             r, s = b * n_fingers + f, j * n_fingers + f  # the rod in state and in new
-            for i in range(n_nodes):  # element by element: the GPU build copies no array into another by slice
-                for k in range(stride):
-                    state.q[r, i, k] = new.q[s, i, k]
-                    state.velocity[r, i, k] = new.velocity[s, i, k]
-                    state.acceleration[r, i, k] = new.acceleration[s, i, k]
-                state.held[r, i] = new.held[s, i]
-                if state.hold_offset.shape[0] > 0:
-                    for k in range(3):
-                        state.hold_offset[r, i, k] = new.hold_offset[s, i, k]
-                if state.tangent.shape[0] > 0:
-                    state.reference_twist[r, i] = new.reference_twist[s, i]
-                    if i < n_nodes - 1:
-                        for k in range(3):
-                            state.tangent[r, i, k] = new.tangent[s, i, k]
-                            state.director[r, i, k] = new.director[s, i, k]
             for i in range(normal_reaction.shape[1]):
                 interval.normal_impulse[r, i] += max(normal_reaction[s, i], 0.0) * dt
                 for d in range(3):
                     interval.impulse[r, i, d] += reaction[s, i, d] * dt
             ramped = interval.natural_curvature[r] + interval.curvature_rate[r] * dt
             interval.natural_curvature[r] = min(max(ramped, interval.curvature_low), interval.curvature_high)
-        if state.body_position.shape[0] > 0:
-            for k in range(3):
-                state.body_position[b, k] = new.body_position[j, k]
-                state.body_velocity[b, k] = new.body_velocity[j, k]
-                state.body_angular_velocity[b, k] = new.body_angular_velocity[j, k]
-                for m in range(3):
-                    state.body_orientation[b, k, m] = new.body_orientation[j, k, m]
         interval.newton_iterations[b] += iterations[j]
         interval.clock[b] += dt
 
 
 @kernel(python=True)
-def take_steps(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body, interval):
+def take_steps(first, n_steps, dt, times, currents, state, rods, terms, solvers, geometry, projection, body,
+               interval):
     """:func:`step_batch` with its scratch made here: the CPU's entry point."""
-    work = step_work(state, solver[5], geometry[0].shape[1], rods[FINGERS_FIELD][0] > 0.0, body is not None)
-    return step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body,
+    work = step_work(state, solvers[0][5], geometry[0].shape[1], rods[FINGERS_FIELD][0] > 0.0, body is not None)
+    return step_batch(first, n_steps, dt, times, currents, state, rods, terms, solvers, geometry, projection, body,
                       interval, work)
 
 
 @kernel(python=True, inline=True)
-def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, geometry, projection, body, interval,
-               work):
+def step_batch(first, n_steps, dt, times, currents, state, rods, terms, solvers, geometry, projection, body,
+               interval, work):
     """Steps ``first`` … ``n_steps`` − 1 of length ``dt`` [s] of every running gripper, from and into ``state``
-    (:class:`WorkingState`), with the current at every gripper at each step's start and end, ``gripper_water``
-    (n_steps + 1, B, 3) [m/s]; ramps and sums into ``interval`` (:class:`Interval`). ``rods`` (with ``state``'s
-    frames in 3-D), ``terms``, ``solver`` and ``geometry`` are the plain fields that
-    :func:`~.corrector.solve_with_contact` takes, ``projection`` (R, D, 3) rod coordinates from world vectors;
-    ``body`` the free bodies' arrays, or None for a fixed object; ``work`` the scratch (:class:`StepWork`).
-    Returns the index of the step where it stopped: ``n_steps`` when it took them all; a step that some running
-    grippers did not settle, which the others took and the ``pending`` ones (``interval.pending``) have still to take
-    on the adaptive path; or a step that no gripper runs to take. The GPU runs this for one gripper per thread."""
+    (:class:`WorkingState`), starting at the batch times ``times`` (n_steps + 1,) [s], with the current at every
+    gripper from ``currents`` (:class:`~..kernels.current.CurrentArrays`); ramps and sums into ``interval``
+    (:class:`Interval`). ``rods`` (with ``state``'s frames in 3-D), ``terms`` and ``geometry`` are the plain fields
+    that :func:`~.corrector.solve_with_contact` takes, ``solvers`` its solver fields for steps of ``dt``, ``dt``/2, …
+    (one per level of halving the scene allows, and one more), ``projection`` (R, D, 3) rod coordinates from world
+    vectors; ``body`` the free bodies' arrays, or None for a fixed object; ``work`` the scratch (:class:`StepWork`).
+
+    A step that a gripper does not settle is halved: in place in a batch of one, else left ``pending`` (module
+    docstring); a batch of one whose gripper is ``pending`` on entry takes step ``first`` in halves. Returns the
+    index of the step where it stopped: ``n_steps`` when it took them all; a step that some running grippers of a
+    larger batch did not settle, which the others took and the ``pending`` ones (``interval.pending``) have still to
+    take; or a step that no gripper runs to take. The GPU runs this for one gripper per thread."""
     n_rods, n_nodes, stride = state.q.shape
-    n_fingers = solver[5]
+    n_fingers = solvers[0][5]
     n_grippers = n_rods // n_fingers
     dim = geometry[0].shape[1]
     planar = state.tangent.shape[0] == 0
@@ -246,73 +282,124 @@ def step_batch(first, n_steps, dt, gripper_water, state, rods, terms, solver, ge
     sliding, friction, measured, hold_at = work.sliding, work.friction, work.measured, work.hold_at
     converged, changed, iterations, corrector = work.converged, work.changed, work.iterations, work.corrector
     ratio, residual, reaction, normal_reaction = work.ratio, work.residual, work.reaction, work.normal_reaction
-    ok, most, every = work.ok, work.most, work.every
+    ok, most, every, start = work.ok, work.most, work.every, work.level_start
+    gripper_water, water_end = work.gripper_water, work.water_acceleration  # the end's water, then its change
+    deepest = len(solvers) - 1
+    halve_here = n_grippers == 1 and interval.halve
+    resume = halve_here and interval.pending[0]  # a larger batch left this gripper's first step to be halved
     interval.pending[:] = False
     for k in range(first, n_steps):
         if not interval.running.any():
             return k
-        project_water(geometry[5], gripper_water[k], water)
-        predict(state.q, state.velocity, state.acceleration, dt, q_pred, new.q)
-        for r in range(n_rods):  # element by element: the GPU build copies no array into another by slice
-            for i in range(n_nodes):
-                new.held[r, i] = state.held[r, i]
-                sliding[r, i] = False
-                for d in range(dim):
-                    friction[r, i, d] = 0.0
-                    hold_at[r, i, d] = state.q[r, i, d]
+        level = 0  # how many times the step being taken was halved
+        start[0] = times[k]
+        if resume and k == first:
+            copy_gripper(state, 0, work.saved, 0, n_fingers)
+            start[1] = start[0]
+            level = 1
+        done = 0  # of the step, in steps of dt / 2**deepest
+        taken_iterations = 0
+        while True:
+            h = dt
+            for _ in range(level):
+                h *= 0.5
+            solver = solvers[level]
+            for b in range(n_grippers):
+                current_velocity(currents, b, start[level], gripper_water[b])
+            project_water(geometry[5], gripper_water, water)
+            predict(state.q, state.velocity, state.acceleration, h, q_pred, new.q)
+            for r in range(n_rods):  # element by element: the GPU build copies no array into another by slice
+                for i in range(n_nodes):
+                    new.held[r, i] = state.held[r, i]
+                    sliding[r, i] = False
+                    for d in range(dim):
+                        friction[r, i, d] = 0.0
+                        hold_at[r, i, d] = state.q[r, i, d]
+                    if body is not None:
+                        for d in range(3):
+                            new.hold_offset[r, i, d] = state.hold_offset[r, i, d]
+            changed[:] = False
+            corrector[:] = 0
+            step = (state.q, q_pred, interval.natural_curvature, water, h, near)
+            result = (converged, iterations, ratio, residual, corrector, changed)
+            holds = (new.held, new.hold_offset, projection, sliding, friction, measured, geometry[0], geometry[1],
+                     geometry[2], geometry[3])
+            if body is not None:
+                for b in range(n_grippers):
+                    current_velocity(currents, b, start[level] + h, water_end[b])
+                    for d in range(3):
+                        new.body_position[b, d] = state.body_position[b, d] + h * state.body_velocity[b, d]
+                        new.body_angular_velocity[b, d] = h * state.body_angular_velocity[b, d]  # θ, the rotation
+                        water_acceleration[b, d] = (water_end[b, d] - gripper_water[b, d]) / h
+            old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
+            motion = (new.body_position, new.body_angular_velocity, new.body_orientation, old, gripper_water,
+                      water_acceleration)  # (empty arrays for a fixed object, and not used)
+            correct_contacts(new.q, step, rods, terms, solver, holds, hold_at, geometry, with_motion(body, motion),
+                             result, work.corrector_work)
+            finish(new.q, state.q, state.velocity, h, new.velocity, new.acceleration)
+            if body is not None:
+                for b in range(n_grippers):
+                    for d in range(3):
+                        new.body_velocity[b, d] = (new.body_position[b, d] - state.body_position[b, d]) / h
+                        new.body_angular_velocity[b, d] = new.body_angular_velocity[b, d] / h
+            if not planar:
+                rod3d_update_frames(new.q, state.tangent, state.director, state.reference_twist, new.tangent,
+                                    new.director, new.reference_twist, work.corrector_work.newton.elastic)
+            any_pending, again = False, False
+            for b in range(n_grippers):
+                all_converged, resolved, finite = True, True, True
+                most[b] = 0
+                for r in range(b * n_fingers, (b + 1) * n_fingers):
+                    all_converged = all_converged and converged[r]
+                    resolved = resolved and not changed[r]
+                    most[b] = max(most[b], iterations[r])
+                    for i in range(n_nodes):
+                        for s in range(stride):
+                            finite = finite and math.isfinite(new.q[r, i, s]) \
+                                and math.isfinite(new.velocity[r, i, s])
                 if body is not None:
                     for d in range(3):
-                        new.hold_offset[r, i, d] = state.hold_offset[r, i, d]
-        changed[:] = False
-        corrector[:] = 0
-        step = (state.q, q_pred, interval.natural_curvature, water, dt, near)
-        result = (converged, iterations, ratio, residual, corrector, changed)
-        holds = (new.held, new.hold_offset, projection, sliding, friction, measured, geometry[0], geometry[1],
-                 geometry[2], geometry[3])
-        if body is not None:
-            for b in range(n_grippers):
-                for d in range(3):
-                    new.body_position[b, d] = state.body_position[b, d] + dt * state.body_velocity[b, d]
-                    new.body_angular_velocity[b, d] = dt * state.body_angular_velocity[b, d]  # θ, the rotation
-                    water_acceleration[b, d] = (gripper_water[k + 1, b, d] - gripper_water[k, b, d]) / dt
-        old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
-        motion = (new.body_position, new.body_angular_velocity, new.body_orientation, old, gripper_water[k],
-                  water_acceleration)  # (empty arrays for a fixed object, and not used)
-        correct_contacts(new.q, step, rods, terms, solver, holds, hold_at, geometry, with_motion(body, motion), result,
-                         work.corrector_work)
-        finish(new.q, state.q, state.velocity, dt, new.velocity, new.acceleration)
-        if body is not None:
-            for b in range(n_grippers):
-                for d in range(3):
-                    new.body_velocity[b, d] = (new.body_position[b, d] - state.body_position[b, d]) / dt
-                    new.body_angular_velocity[b, d] = new.body_angular_velocity[b, d] / dt
-        if not planar:
-            rod3d_update_frames(new.q, state.tangent, state.director, state.reference_twist, new.tangent,
-                                new.director, new.reference_twist, work.corrector_work.newton.elastic)
-        any_pending = False
-        for b in range(n_grippers):
-            all_converged, resolved, finite = True, True, True
-            most[b] = 0
-            for r in range(b * n_fingers, (b + 1) * n_fingers):
-                all_converged = all_converged and converged[r]
-                resolved = resolved and not changed[r]
-                most[b] = max(most[b], iterations[r])
-                for i in range(n_nodes):
-                    for s in range(stride):
-                        finite = finite and math.isfinite(new.q[r, i, s]) and math.isfinite(new.velocity[r, i, s])
-            if body is not None:
-                for d in range(3):
-                    finite = finite and math.isfinite(new.body_position[b, d]) \
-                        and math.isfinite(new.body_velocity[b, d])
-            # as the adaptive path: a step not settled is halved, or without halvings kept if Newton converged
-            interval.pending[b] = interval.running[b] and interval.halve and not (all_converged and resolved)
-            any_pending = any_pending or interval.pending[b]
-            ok[b] = all_converged and not interval.pending[b] and finite
-        contact_reactions(new.q, residual, new.held, friction, geometry[0], geometry[1], geometry[5], reaction,
-                          normal_reaction)
-        commit_step(dt, every, ok, new, most, normal_reaction, reaction, state, interval)
-        if any_pending:  # the others took the step; the pending ones keep their state for the adaptive path
-            return k
+                        finite = finite and math.isfinite(new.body_position[b, d]) \
+                            and math.isfinite(new.body_velocity[b, d])
+                # as the adaptive path: a step not settled is halved, or at the deepest level (and without
+                # halvings) kept if Newton converged
+                settled = all_converged and resolved
+                again = halve_here and not settled and level < deepest
+                interval.pending[b] = interval.running[b] and interval.halve and not settled and not halve_here
+                any_pending = any_pending or interval.pending[b]
+                ok[b] = all_converged and not interval.pending[b] and not again and finite
+            if again:  # a batch of one takes the step again as two halves, from the state it started from
+                if level == 0:
+                    copy_gripper(state, 0, work.saved, 0, n_fingers)
+                start[level + 1] = start[level]
+                level += 1
+                continue
+            if halve_here and level > 0:
+                if not ok[0]:  # a half step failed: the gripper stops at the state before the whole step
+                    copy_gripper(work.saved, 0, state, 0, n_fingers)
+                    commit_step(dt, every, ok, new, most, normal_reaction, reaction, state, interval)
+                    break
+                taken_iterations += most[0]
+                done += 1 << (deepest - level)
+                if done < 1 << deepest:  # on to the next half step, at the level of the last one it completes
+                    copy_gripper(new, 0, state, 0, n_fingers)
+                    remaining = done
+                    level = deepest
+                    while remaining % 2 == 0:
+                        remaining //= 2
+                        level -= 1
+                    h = dt
+                    for _ in range(level):
+                        h *= 0.5
+                    start[level] += h
+                    continue
+                most[0] = taken_iterations
+            contact_reactions(new.q, residual, new.held, friction, geometry[0], geometry[1], geometry[5], reaction,
+                              normal_reaction)
+            commit_step(dt, every, ok, new, most, normal_reaction, reaction, state, interval)
+            if any_pending:  # the others took the step; the pending ones keep their state for the adaptive path
+                return k
+            break
     return n_steps
 
 
@@ -326,4 +413,5 @@ with_motion = none_or(_with_motion)
 compiles: :mod:`~..kernels.typed_none`)."""
 
 
-__all__ = ["WorkingState", "Interval", "StepWork", "step_work", "commit_step", "take_steps", "step_batch"]
+__all__ = ["WorkingState", "N_ROD_FIELDS", "Interval", "StepWork", "step_work", "copy_gripper", "commit_step",
+           "take_steps", "step_batch"]
