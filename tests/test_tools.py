@@ -435,3 +435,15 @@ def test_first_step_times_the_demos_own_commands(tmp_path):
     assert [command[2] for command in commands] == ["examples.reproduce_paper", "examples.record_video",
                                                     "examples.record_video"]
     assert all(str(tmp_path) in " ".join(command) and "$out" not in " ".join(command) for command in commands)
+
+
+def test_the_gpu_session_script_parses_and_refuses_an_unknown_part(tmp_path):
+    """tools/gpu_session.sh, run on a lent GPU: valid bash, and a part it does not know stops it before anything
+    runs (no results folder made)."""
+    script = Path(__file__).resolve().parent.parent / "tools" / "gpu_session.sh"
+    assert subprocess.run(["bash", "-n", str(script)], capture_output=True).returncode == 0
+    out = tmp_path / "gpu"
+    run = subprocess.run(["bash", str(script), "sideways"], capture_output=True, text=True,
+                         env={**os.environ, "OUT": str(out)})
+    assert run.returncode == 2 and "usage: bash tools/gpu_session.sh speed|outcomes" in run.stderr
+    assert not out.exists()
