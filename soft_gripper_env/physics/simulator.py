@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .kernels.assembly import N_DESIGN_FIELDS, RodArrays, StepInputs, assemble
-from .kernels.body import BodyArrays, BodyMotion, BodyState, palm_reactions
+from .kernels.body import N_BODY_ARRAYS, BodyArrays, BodyMotion, BodyState, palm_reactions
 from .kernels.contact import contact_reactions, object_in_rod_frames
 from .kernels.current import CurrentBatch
 from .kernels.finger_contact import FingerContact, find_near_fingers, finger_scratch
@@ -57,7 +57,7 @@ from .solvers.records import (
     record,
     take_grippers,
 )
-from .solvers.stepping import Interval, WorkingState, commit_step, take_steps
+from .solvers.stepping import N_ROD_FIELDS, Interval, WorkingState, commit_step, take_steps
 
 
 class BodyModel:
@@ -185,7 +185,6 @@ class Simulator:
         self._subsimulators: dict[int, Simulator] = {}
         self._tolerance_inverse = np.where(disc.free, 1.0 / disc.residual_scale, 0.0)
         self._per_step_cache: dict[float, tuple] = {}
-        self._one_gripper_cache: dict[float, tuple] = {}
         self._clamp_free = np.tile(disc.free, (R, 1))
         self._force_tolerance = disc.residual_scale[0]
         """Newton's tolerance on a force DOF, relative_tolerance·EI/L² [N]."""
@@ -370,8 +369,9 @@ class Simulator:
         gripper's ``clock`` (B,) [s] (default zeros) advances by Δt per step it takes. The steps stop early once
         no gripper runs; the batch's time is that of the last step taken.
 
-        With an object, the steps run in one compiled call (:func:`~.solvers.stepping.take_steps`), halved steps
-        included, so a control interval costs one call instead of one per step."""
+        With an object, the steps run in one compiled call (:func:`~.solvers.stepping.take_steps`), leaving it only
+        for a step that a gripper of a batch of several needs halved (a batch of one halves it in the call), so a
+        control interval costs one call instead of one per step."""
         B, F, R = self.batch_size, self.n_fingers, self.n_rods
         if not isinstance(n_steps, (int, np.integer)) or not 1 <= n_steps <= 1_000_000:
             raise ValueError(f"Simulator.advance: n_steps = {n_steps!r} (count) is outside the allowed range "
@@ -388,24 +388,33 @@ class Simulator:
         interval = Interval(self._natural_curvature(natural_curvature).copy(), rate, low, high, running,
                             np.zeros(B, dtype=bool), clock, np.zeros(B, dtype=np.int64),
                             np.zeros((R, self.disc.n_nodes)), np.zeros((R, self.disc.n_nodes, 3)),
-                            self.scene.newton.max_step_halvings > 0)
+                            np.zeros(B, dtype=bool), self.scene.newton.max_step_halvings > 0)
         work = self._working_state(state, copy=True)
         dt = self.scene.time_step
         times = [state.time]
         for _ in range(n_steps):
             times.append(times[-1] + dt)  # the clock of successive steps, to the bit
+        k = 0
         if self._gpu is not None:
             return self._advance_on_gpu(work, interval, times, n_steps)
-        k = 0
-        if self._has_object:  # every gripper's steps in one compiled call
+        if self._has_object:
+            step_times = np.array(times)
             rods = self._plain_rods if work.tangent.size == 0 else \
                 self._plain_rods[:N_DESIGN_FIELDS] + (work.tangent, work.director, work.reference_twist)
             body = None if self._body is None else self._body.plain_arrays
-            k = take_steps(0, n_steps, dt, np.array(times), self._kernel_currents, work, rods, self._plain_terms,
-                           self._one_gripper_levels(dt), self._plain_geometry, self._projection[:F], body, interval)
-        while k < n_steps and interval.running.any():  # rods on their own: the adaptive path, a step at a time
-            self._adaptive_step(work, times[k], dt, interval)
-            k += 1
+        while k < n_steps and interval.running.any():
+            if not self._has_object:
+                self._adaptive_step(work, times[k], dt, interval)
+                k += 1
+                continue
+            k = take_steps(k, n_steps, dt, step_times, self._kernel_currents, work, rods, self._plain_terms,
+                           self._halving_levels(dt), self._plain_geometry, self._projection, body, interval)
+            if interval.pending.any():  # the others took step k; it is halved for the grippers left pending
+                self._halve_pending(work, interval, k, dt, step_times, body, np.nonzero(interval.pending)[0])
+                k += 1
+            elif k < n_steps and interval.running.any():
+                raise RuntimeError(f"take_steps stopped at step {k} of {n_steps} with grippers running and none "
+                                   f"pending")
         N = self.disc.n_nodes
         return record(Advance, state=self._state_of(work, times[k]),
                       natural_curvature=interval.natural_curvature.reshape(B, F), clock=interval.clock,
@@ -460,6 +469,33 @@ class Simulator:
                                      self.scene.newton.max_step_halvings)
         self._commit(np.arange(self.batch_size), result.converged & finite(result.state), result.newton_iterations,
                      result, dt, work, interval)
+
+    def _halve_pending(self, work: WorkingState, interval: Interval, k: int, dt: float, step_times: np.ndarray,
+                       body: tuple | None, grippers: np.ndarray) -> None:
+        """Step ``k`` of :meth:`advance` (of ``dt`` [s], from the batch time ``step_times[k]``) for ``grippers``,
+        which the compiled steps left pending: each takes it in halves as a batch of one, through the same compiled
+        steps on views of its rows of ``work`` and ``interval``, which it updates."""
+        F = self.n_fingers
+        solvers = tuple(for_one_gripper(solver, F) for solver in self._halving_levels(dt))
+        projection = self._projection[:F]
+        for b in grippers:
+            rods, one = slice(b * F, (b + 1) * F), slice(b, b + 1)
+            state = WorkingState(*(x[rods] for x in work[:N_ROD_FIELDS]), *(x[one] for x in work[N_ROD_FIELDS:]))
+            rod_arrays = self._plain_rods if state.tangent.size == 0 else \
+                self._plain_rods[:N_DESIGN_FIELDS] + (state.tangent, state.director, state.reference_twist)
+            starts, ends, radii, finger_radius, friction, directions, plane_normals, any_motion = \
+                self._plain_geometry
+            geometry = (starts[rods], ends[rods], radii[rods], finger_radius, friction[rods], directions,
+                        plane_normals, any_motion[one])
+            own_body = None if body is None else tuple(x[one] for x in body[:N_BODY_ARRAYS]) + body[N_BODY_ARRAYS:]
+            own = interval._replace(natural_curvature=interval.natural_curvature[rods],
+                                    curvature_rate=interval.curvature_rate[rods], running=interval.running[one],
+                                    failed=interval.failed[one], clock=interval.clock[one],
+                                    newton_iterations=interval.newton_iterations[one],
+                                    normal_impulse=interval.normal_impulse[rods], impulse=interval.impulse[rods],
+                                    pending=interval.pending[one])
+            take_steps(k, k + 1, dt, step_times, tuple(x[one] for x in self._kernel_currents), state, rod_arrays,
+                       self._plain_terms, solvers, geometry, projection, own_body, own)
 
     def _commit(self, grippers: np.ndarray, ok: np.ndarray, iterations: np.ndarray, result: StepResult, dt: float,
                 work: WorkingState, interval: Interval) -> None:
@@ -674,13 +710,6 @@ class Simulator:
                 force_tolerance=float(force_tolerance), finger_length=float(length),
                 penetration_tolerance=penetration_tolerance(dt)))
         return self._per_step_cache[dt]
-
-    def _one_gripper_levels(self, dt: float) -> tuple:
-        """:meth:`_halving_levels` for one gripper's F rods, as :func:`~.solvers.stepping.gripper_steps` takes them."""
-        if dt not in self._one_gripper_cache:
-            self._one_gripper_cache[dt] = tuple(for_one_gripper(solver, self.n_fingers)
-                                                for solver in self._halving_levels(dt))
-        return self._one_gripper_cache[dt]
 
     def _halving_levels(self, dt: float) -> tuple:
         """:meth:`_per_step`'s settings for steps of ``dt``, ``dt``/2, … [s], one for each level of halving that the

@@ -1,5 +1,5 @@
 """Simulator.advance: many steps in one compiled call give, to the bit, what as many calls of Simulator.step give,
-including the steps it halves and the grippers that fail or do not run."""
+including the steps it hands to the adaptive (halving) path and the grippers that fail or do not run."""
 
 from dataclasses import replace
 
@@ -103,23 +103,38 @@ def test_advance_is_bitwise_the_steps_of_a_grasp(model):
                 clock=advanced.clock)
 
 
-def test_advance_halves_a_step_for_the_grippers_that_need_it():
-    """Two Newton iterations per solve are too few for the impacts: each gripper that does not settle a step takes
-    it in halves inside the compiled call, while the others take it whole, and advance still gives what the steps
+def test_advance_halves_a_step_for_the_grippers_that_need_it(monkeypatch):
+    """Two Newton iterations per solve are too few for the impacts: steps are halved on the adaptive path for the
+    grippers that did not settle them, while the others take them whole, and advance still gives what the steps
     give."""
     scenes = [replace(scene, newton=NewtonSettings(max_iterations=2)) for scene in task_scenes("planar", 4)]
     sim = Simulator(scenes)
+    pending = []
+    halve = sim._halve_pending
+
+    def counted(work, interval, k, dt, step_times, body, grippers):
+        assert np.array_equal(grippers, np.nonzero(interval.pending)[0])  # the compiled steps left them pending
+        pending.append(len(grippers))
+        halve(work, interval, k, dt, step_times, body, grippers)
+
+    monkeypatch.setattr(sim, "_halve_pending", counted)
     _, substeps = assert_same(sim, sim.initial_state(), 25, np.array([[-1.0] * 3, [-0.6] * 3, [0.0] * 3, [-1.0] * 3]),
                               natural_curvature=np.array([[-0.1] * 3, [-0.1] * 3, [0.0] * 3, [-0.2] * 3]))
     assert substeps > 1
+    assert pending and min(pending) < 4  # some steps were halved for part of the batch only
+
+
+def _uncalled(*args):
+    raise AssertionError("a batch of one left a step to the host's adaptive path")
 
 
 @pytest.mark.parametrize("model", ["planar", "3d"])
-def test_a_gripper_halves_its_steps_in_the_compiled_call_whatever_its_batch(model):
-    """A gripper halves a step it does not settle inside the compiled steps, level by level, with the water at each
-    half step's time: bitwise what the steps of the adaptive path give, alone and beside another gripper. Planar:
-    Newton capped at four iterations; 3-D: no corrector re-solves, so that a step with a new hold is halved down to
-    the deepest level and taken there unresolved."""
+def test_a_batch_of_one_halves_its_steps_in_the_compiled_call(model, monkeypatch):
+    """A gripper alone (one env, or a GPU thread) halves a step it does not settle inside the compiled steps, level
+    by level, with the water at each half step's time: bitwise what the steps of the adaptive path give, and what
+    the same gripper gets from the host's halving when it shares a batch. Planar: Newton capped at four
+    iterations; 3-D: no corrector re-solves, so that a step with a new hold is halved down to the deepest level and
+    taken there unresolved."""
     scene = task_scenes(model, 1, seed=5)[0]
     if model == "planar":
         scene, rate, start = replace(scene, newton=NewtonSettings(max_iterations=4)), -0.3, -0.1
@@ -129,12 +144,16 @@ def test_a_gripper_halves_its_steps_in_the_compiled_call_whatever_its_batch(mode
         rate, start = -0.3, -0.3
     rate = np.array([[rate, 0.8 * rate, rate]])
     alone = Simulator(scene)
+    monkeypatch.setattr(alone, "_halve_pending", _uncalled)
     advanced, substeps = assert_same(alone, alone.initial_state(), 60, rate, natural_curvature=np.full((1, 3), start))
     assert substeps >= 4  # halved more than once within a step
     assert not advanced.failed.any() and advanced.normal_impulse.sum() > 0
-    mate = replace(task_scenes(model, 1, seed=6)[0], newton=scene.newton, contact=scene.contact)
-    batch = Simulator([mate, scene])
+    batch = Simulator([scene, scene])
+    halved = []
+    halve = batch._halve_pending
+    monkeypatch.setattr(batch, "_halve_pending", lambda *args: (halved.append(len(args[-1])), halve(*args)))
     shared = batch.advance(batch.initial_state(), np.full((2, 3), start), np.repeat(rate, 2, axis=0), 60)
+    assert halved  # the batch's steps were halved on the host
     for name in STATE_FIELDS:
         value = getattr(advanced.state, name)
         if value is not None:
@@ -143,12 +162,13 @@ def test_a_gripper_halves_its_steps_in_the_compiled_call_whatever_its_batch(mode
     np.testing.assert_array_equal(shared.newton_iterations[1], advanced.newton_iterations[0])
 
 
-def test_a_gripper_whose_half_step_fails_keeps_the_state_before_the_step():
-    """With one halving allowed and three Newton iterations, a fast-closing gripper takes the first half of a step
-    and fails in the second: it stops with the state from before the whole step (not the half step it took), as
-    the adaptive path leaves it."""
+def test_a_batch_of_one_whose_half_step_fails_keeps_the_state_before_the_step(monkeypatch):
+    """With one halving allowed and three Newton iterations, a fast-closing gripper alone takes the first half of
+    a step and fails in the second: it stops with the state from before the whole step (not the half step it
+    took), as the adaptive path leaves it."""
     scene = replace(task_scenes("planar", 1)[0], newton=NewtonSettings(max_iterations=3, max_step_halvings=1))
     sim = Simulator(scene)
+    monkeypatch.setattr(sim, "_halve_pending", _uncalled)
     advanced, substeps = assert_same(sim, sim.initial_state(), 80, np.array([[-1.0] * 3]),
                                      natural_curvature=np.full((1, 3), -0.05))
     assert advanced.failed[0] and substeps == 2

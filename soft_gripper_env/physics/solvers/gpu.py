@@ -13,10 +13,10 @@ GPU; a few numbers of scratch from :func:`~..kernels.local.local_array`) and use
 - the rods on their own (:class:`GpuRods`): the thread copies its gripper's state into its own arrays and takes the
   interval's steps with :func:`~.newton.step_gripper_rods` (the rods' energies, the water, the contact between the
   fingers, the banded factorisation and Newton's loop) and :func:`~..kernels.rod_3d.rod_frames`;
-- grasping a fixed object or a free body (:class:`GpuGrasp`): the thread runs :func:`~.stepping.gripper_steps`, the
+- grasping a fixed object or a free body (:class:`GpuGrasp`): the thread runs :func:`~.stepping.step_batch`, the
   CPU's own loop of steps (predictor, contact corrector, the free body's coupled solve, the step's end, the contact
-  reactions, halved steps), on its gripper's views of the batch (:func:`~.stepping.gripper_views`, as the CPU takes
-  them), with its scratch in its own arrays.
+  reactions), on its gripper alone, with its scratch in its own arrays. A step the gripper does not settle is left
+  pending, and the host halves it on the CPU as the CPU path does, then launches again from the next step.
 
 A thread's local memory is interleaved across the threads of a warp by the GPU, so the same element of neighbouring
 threads' arrays is read in one transaction. The arrays' sizes are a kernel's compile-time constants (fingers, nodes,
@@ -41,7 +41,6 @@ import numpy as np
 from numba.core import types
 
 from ..kernels.assembly import FINGERS_FIELD, N_DESIGN_FIELDS, StepInputs, named_rods
-from ..kernels.body import N_BODY_ARRAYS
 from ..kernels.compiled import kernel
 from ..kernels.current import CurrentBatch
 from ..kernels.finger_contact import finger_scratch_size
@@ -52,7 +51,7 @@ from ..scene.forces import ForceTerms
 from ..scene.scene import STEP_HALVINGS_LIMIT
 from .corrector import CorrectorWork
 from .newton import NewtonWork, SolverArrays, SolveResult, for_one_gripper, step_gripper_rods
-from .stepping import StepWork, WorkingState, gripper_body, gripper_steps, gripper_views
+from .stepping import Interval, StepWork, WorkingState, step_batch
 
 THREADS_PER_BLOCK = 64
 """CUDA threads (grippers) per block: each thread holds tens of kilobytes of local arrays, so small blocks keep
@@ -430,7 +429,7 @@ class GraspKernelShape(NamedTuple):
 def grasp_kernel(shape: GraspKernelShape):
     """The CUDA kernel that takes the steps of a control interval of grippers grasping an object, for grippers of
     ``shape``, one thread per gripper (compiled on its first launch, then kept): each thread runs
-    :func:`~.stepping.gripper_steps`, the CPU's own loop, on its gripper alone, with its scratch in the thread's own
+    :func:`~.stepping.step_batch`, the CPU's own loop, on its gripper alone, with its scratch in the thread's own
     arrays. Its arguments are tuples (a tuple reaches the simulator's threads as the host's arrays):
     ``state`` the :class:`~.stepping.WorkingState`'s fields; ``rods`` the design's fields of
     :class:`~..kernels.assembly.RodArrays`; ``terms`` the :class:`~..scene.forces.ForceTerms`' fields; ``solver``
@@ -454,7 +453,6 @@ def _build_grasp_kernel(shape: GraspKernelShape):
     framed = F if three_d else 0
     held_by_body = F if free else 0
     bodies = 1 if free else 0
-    moving = 1 if free and three_d else 0  # a 3-D free body's admissible motions
     contact_fingers = F if shape.finger_contact else 0
     elastic_size = elastic_scratch_size(N if three_d else 0)
     finger_size = finger_scratch_size(contact_fingers, N)
@@ -468,13 +466,35 @@ def _build_grasp_kernel(shape: GraspKernelShape):
         if b >= running.shape[0]:
             return
         times, currents, stops, dt, n_steps = timing
+        first = b * F
+        last = first + F
+        q, velocity, acceleration, held, hold_offset, tangent, director, twist, position, body_velocity, \
+            orientation, angular_velocity = state
+        # the gripper's own rods and body: views of the batch's arrays
+        own = WorkingState(q[first:last], velocity[first:last], acceleration[first:last], held[first:last],
+                           hold_offset[first:first + held_by_body], tangent[first:first + framed],
+                           director[first:first + framed], twist[first:first + framed],
+                           position[b:b + bodies], body_velocity[b:b + bodies], orientation[b:b + bodies],
+                           angular_velocity[b:b + bodies])
+        natural_curvature, rate, low, high, _, failed, clock, iterations, normal_impulse, impulse, pending, \
+            halve = interval
+        own_interval = Interval(natural_curvature[first:last], rate[first:last], low, high, running[b:b + 1],
+                                failed[b:b + 1], clock[b:b + 1], iterations[b:b + 1], normal_impulse[first:last],
+                                impulse[first:last], pending[b:b + 1], halve)
         geometry, projection = geometry_projection
-        own, own_geometry, own_interval, own_currents = gripper_views(b, F, held_by_body, framed, bodies, moving,
-                                                                      state, geometry, interval, currents)
-        rods = rods_design + (own.tangent, own.director, own.reference_twist)
+        starts, ends, radii, finger_radius, friction, directions, plane_normals, any_motion = geometry
+        own_geometry = (starts[first:last], ends[first:last], radii[first:last], finger_radius, friction[first:last],
+                        directions, plane_normals, any_motion[b:b + (1 if free and three_d else 0)])
+        if three_d:
+            rods = rods_design + (own.tangent, own.director, own.reference_twist)
+        else:
+            rods = rods_design + (tangent[:0], director[:0], twist[:0])
         own_body = None
         if free:
-            own_body = gripper_body(body, b)
+            own_body = (body[0][b:b + 1], body[1][b:b + 1], body[2][b:b + 1], body[3][b:b + 1], body[4][b:b + 1],
+                        body[5][b:b + 1], body[6][b:b + 1], body[7][b:b + 1], body[8][b:b + 1], body[9][b:b + 1],
+                        body[10][b:b + 1], body[11][b:b + 1], body[12][b:b + 1], body[13][b:b + 1], body[14],
+                        body[15], body[16], body[17])
         # the scratch (stepping.step_work's, for one gripper), in the thread's own arrays
         flags = cuda.local.array((8, F), boolean)
         node_flags = cuda.local.array((7, F, N), boolean)
@@ -535,8 +555,8 @@ def _build_grasp_kernel(shape: GraspKernelShape):
                         cuda.local.array(1, boolean), cuda.local.array(1, int64), gripper, corrector)
         own_currents = (currents[0][b:b + 1], currents[1][b:b + 1], currents[2][b:b + 1], currents[3][b:b + 1],
                         currents[4][b:b + 1], currents[5][b:b + 1], currents[6][b:b + 1], currents[7][b:b + 1])
-        stops[b] = gripper_steps(0, n_steps, dt, times, own_currents, own, rods, terms, solvers, own_geometry,
-                                 projection, own_body, own_interval, work)
+        stops[b] = step_batch(0, n_steps, dt, times, own_currents, own, rods, terms, solvers, own_geometry,
+                              projection, own_body, own_interval, work)
 
     return grasp_interval
 
@@ -571,7 +591,7 @@ class GpuGrasp:
         device_interval = [written_at[i] if i in written_at else _on_device(self.cuda, x)
                            for i, x in enumerate(interval)]
         if body is None:  # a fixed object: a placeholder the kernel does not read
-            body = tuple(np.zeros(n_grippers) for _ in range(N_BODY_ARRAYS)) + (0.0, 0.0, 0.0, 0.0)
+            body = tuple(np.zeros(n_grippers) for _ in range(14)) + (0.0, 0.0, 0.0, 0.0)
         arguments = (tuple(device[:n_state]), self.rods, self.terms, self.solvers,
                      (_on_device(self.cuda, tuple(geometry)), self.projection),
                      _on_device(self.cuda, tuple(body)),
@@ -595,9 +615,9 @@ class GpuGrasp:
         return stops
 
 
-_INTERVAL_WRITTEN = (0, 4, 5, 6, 7, 8, 9)
+_INTERVAL_WRITTEN = (0, 4, 5, 6, 7, 8, 9, 10)
 """The fields of :class:`~.stepping.Interval` the kernel writes: κ̄, running, failed, clock, Newton iterations, the
-two impulses."""
+two impulses, pending."""
 
 
 def grasp_ptx(constants: tuple, state: tuple, geometry: tuple, body: tuple | None, interval: tuple,

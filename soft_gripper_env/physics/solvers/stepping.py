@@ -8,13 +8,14 @@ and with the same arithmetic: the predictor, the corrector around Newton's metho
 reactions. Per gripper it sums what a control interval reads (Newton iterations, the impulses of the contact
 reactions) and ramps κ̄ at its rate (:func:`commit_step`).
 
-Each gripper takes the interval's steps alone, on views of its rows of the batch's arrays (:func:`gripper_views`):
-the CPU one after another in one call, a GPU thread its own (:mod:`.gpu`), with the same compiled
-:func:`gripper_steps`. A step that a gripper does not settle (Newton failed or the corrector spent its budget) is
-taken again as two half steps, each of which may be halved again, as the simulator's adaptive path does, with the
-water at each half step's own time (:func:`~..kernels.current.current_velocity`); a step that fails even so stops
-the gripper with the state from before it. Nothing in a step mixes grippers, so a gripper's trajectory does not
-depend on what else shares its batch, and it matches ``Simulator.step``'s adaptive path to the bit.
+A step that a gripper does not settle (Newton failed or the corrector spent its budget) is taken again as two half
+steps, each of which may be halved again, as the simulator's adaptive path does, with the water at each half step's
+time (:func:`~..kernels.current.current_velocity`). A batch of one gripper (a GPU thread's, or one environment's)
+does it right there. A larger batch leaves the gripper ``pending`` while the others take the step, and returns; the
+simulator then gives each pending gripper that step as a batch of one of its own (views of its rows, the same
+compiled function), which takes it in halves, and calls :func:`take_steps` again for the batch from the next step.
+So a gripper's trajectory does not depend on what else shares its batch, and matches the adaptive path of
+``Simulator.step`` to the bit.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..kernels.assembly import FINGERS_FIELD, N_DESIGN_FIELDS
+from ..kernels.assembly import FINGERS_FIELD
 from ..kernels.compiled import kernel
 from ..kernels.contact import contact_reactions
 from ..kernels.current import current_velocity
@@ -66,6 +67,10 @@ class WorkingState(NamedTuple):
     """[rad/s], (B, 3)."""
 
 
+N_ROD_FIELDS = WorkingState._fields.index("body_position")
+"""How many of :class:`WorkingState`'s fields are per rod (the body's, per gripper, follow them)."""
+
+
 class Interval(NamedTuple):
     """What a run of steps ramps and sums per gripper, in place."""
 
@@ -90,6 +95,9 @@ class Interval(NamedTuple):
     """Σ max(R_n, 0)·Δt of every node over the steps taken [N·s], (R, N)."""
     impulse: np.ndarray
     """Σ R·Δt of every node, world frame [N·s], (R, N, 3)."""
+    pending: np.ndarray
+    """Running grippers of a batch of more than one that did not settle the step where :func:`take_steps` returned,
+    (B,) bool: each takes that step in halves as a batch of one."""
     halve: bool
     """Whether a step that a gripper does not settle is halved (``NewtonSettings.max_step_halvings`` > 0); if not,
     it is taken as it is when Newton converged (the corrector's budget spent) and fails otherwise. A half step at
@@ -97,9 +105,9 @@ class Interval(NamedTuple):
 
 
 class StepWork(NamedTuple):
-    """The scratch of :func:`gripper_steps` for one gripper (B = 1) of R = F rods of N nodes (n DOFs each, D position
-    coordinates): made once per call of :func:`take_steps` on the CPU (:func:`step_work`), the thread's own arrays on
-    the GPU (:mod:`.gpu`). Nothing in it carries from one step to the next."""
+    """The scratch of :func:`step_batch` for a batch of R rods of N nodes (n DOFs each, D position coordinates) in B
+    grippers: made once per call of :func:`take_steps` on the CPU (:func:`step_work`), the thread's own arrays for
+    its gripper on the GPU (:mod:`.gpu`). Nothing in it carries from one step to the next."""
 
     q_pred: np.ndarray
     """The predictor [m, rad], (R, N, S)."""
@@ -216,11 +224,11 @@ def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, st
     (:class:`WorkingState`) from the m grippers of ``new``, those the step left ``ok`` (m,) bool: copies their state,
     adds their Newton ``iterations`` (m,) and the impulses of their ``normal_reaction`` (m·F, N) and ``reaction``
     (m·F, N, 3) [N] into ``interval`` (:class:`Interval`), ramps their κ̄ and advances their clocks. A running gripper
-    that the step did not leave ok stops and fails."""
+    that the step did not leave ok stops and fails; a ``pending`` one is left as it is."""
     n_fingers = state.q.shape[0] // interval.running.shape[0]
     for j in range(grippers.shape[0]):
         b = grippers[j]
-        if not interval.running[b]:
+        if not interval.running[b] or interval.pending[b]:  # stopped, or left for the adaptive path
             continue
         if not ok[j]:
             interval.running[b] = False
@@ -242,86 +250,31 @@ def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, st
 @kernel(python=True)
 def take_steps(first, n_steps, dt, times, currents, state, rods, terms, solvers, geometry, projection, body,
                interval):
-    """The CPU's entry point: every gripper of the batch takes steps ``first`` … ``n_steps`` − 1 alone, as a GPU
-    thread takes them (:func:`gripper_steps` on views of its rows, :func:`gripper_views`), with one gripper's
-    scratch made here once. ``solvers`` and ``projection`` are one gripper's (its F rods'); the other arguments are
-    :func:`gripper_steps`' for the whole batch. Returns the step after the last one any gripper took."""
-    n_fingers = solvers[0][5]
-    n_grippers = state.q.shape[0] // n_fingers
-    held_by_body = n_fingers if state.hold_offset.shape[0] > 0 else 0
-    framed = n_fingers if state.tangent.shape[0] > 0 else 0
-    bodies = 1 if state.body_position.shape[0] > 0 else 0
-    moving = 1 if geometry[7].shape[0] > 0 else 0
-    last = first
-    work = step_work(gripper_views(0, n_fingers, held_by_body, framed, bodies, moving, state, geometry, interval,
-                                   currents)[0], n_fingers, geometry[0].shape[1], rods[FINGERS_FIELD][0] > 0.0,
-                     body is not None)
-    for b in range(n_grippers):
-        own, own_geometry, own_interval, own_currents = gripper_views(b, n_fingers, held_by_body, framed, bodies,
-                                                                      moving, state, geometry, interval, currents)
-        own_rods = rods[:N_DESIGN_FIELDS] + (own.tangent, own.director, own.reference_twist)
-        stop = gripper_steps(first, n_steps, dt, times, own_currents, own, own_rods, terms, solvers, own_geometry,
-                             projection, gripper_body(body, b), own_interval, work)
-        last = max(last, stop)
-    return last
-
-
-@kernel(python=True)
-def gripper_views(b, n_fingers, held_by_body, framed, bodies, moving, state, geometry, interval, currents):
-    """Gripper ``b``'s rows of a batch, as a batch of one (views): its :class:`WorkingState`, contact geometry,
-    :class:`Interval` and currents, from the batch's (those bundles or their fields as plain tuples).
-    ``held_by_body``, ``framed``, ``bodies`` and ``moving`` are how many rows of hold offsets, 3-D frames, bodies and
-    admissible motions a gripper has (``n_fingers`` or 0; 1 or 0), given rather than read from the arrays, since on
-    the GPU an array a scene lacks is one placeholder row."""
-    first, last = b * n_fingers, (b + 1) * n_fingers
-    q, velocity, acceleration, held, hold_offset, tangent, director, twist, position, body_velocity, orientation, \
-        angular_velocity = state
-    own = WorkingState(q[first:last], velocity[first:last], acceleration[first:last], held[first:last],
-                       hold_offset[first:first + held_by_body], tangent[first:first + framed],
-                       director[first:first + framed], twist[first:first + framed], position[b:b + bodies],
-                       body_velocity[b:b + bodies], orientation[b:b + bodies], angular_velocity[b:b + bodies])
-    starts, ends, radii, finger_radius, friction, directions, plane_normals, any_motion = geometry
-    own_geometry = (starts[first:last], ends[first:last], radii[first:last], finger_radius, friction[first:last],
-                    directions, plane_normals, any_motion[b:b + moving])
-    natural_curvature, rate, low, high, running, failed, clock, iterations, normal_impulse, impulse, halve = interval
-    own_interval = Interval(natural_curvature[first:last], rate[first:last], low, high, running[b:b + 1],
-                            failed[b:b + 1], clock[b:b + 1], iterations[b:b + 1], normal_impulse[first:last],
-                            impulse[first:last], halve)
-    own_currents = (currents[0][b:b + 1], currents[1][b:b + 1], currents[2][b:b + 1], currents[3][b:b + 1],
-                    currents[4][b:b + 1], currents[5][b:b + 1], currents[6][b:b + 1], currents[7][b:b + 1])
-    return own, own_geometry, own_interval, own_currents
-
-
-@kernel(python=True)  # the CUDA simulator's threads call it from Python
-def _gripper_body(body, b):
-    return (body[0][b:b + 1], body[1][b:b + 1], body[2][b:b + 1], body[3][b:b + 1], body[4][b:b + 1],
-            body[5][b:b + 1], body[6][b:b + 1], body[7][b:b + 1], body[8][b:b + 1], body[9][b:b + 1],
-            body[10][b:b + 1], body[11][b:b + 1], body[12][b:b + 1], body[13][b:b + 1], body[14], body[15],
-            body[16], body[17])
-
-
-gripper_body = none_or(_gripper_body)
-"""Gripper ``b``'s row of the free bodies' arrays (:class:`~..kernels.body.BodyArrays`' fields), or None for a fixed
-object."""
+    """:func:`step_batch` with its scratch made here: the CPU's entry point."""
+    work = step_work(state, solvers[0][5], geometry[0].shape[1], rods[FINGERS_FIELD][0] > 0.0, body is not None)
+    return step_batch(first, n_steps, dt, times, currents, state, rods, terms, solvers, geometry, projection, body,
+                      interval, work)
 
 
 @kernel(python=True, inline=True)
-def gripper_steps(first, n_steps, dt, times, currents, state, rods, terms, solvers, geometry, projection, body,
-                  interval, work):
-    """Steps ``first`` … ``n_steps`` − 1 of length ``dt`` [s] of one gripper (a batch of one: :func:`gripper_views`)
-    if it runs, from and into ``state`` (:class:`WorkingState`), starting at the batch times ``times``
-    (n_steps + 1,) [s], with the current from ``currents`` (:class:`~..kernels.current.CurrentArrays`' fields);
-    ramps and sums into ``interval`` (:class:`Interval`). ``rods`` (with ``state``'s frames in 3-D), ``terms`` and
-    ``geometry`` are the plain fields that :func:`~.corrector.solve_with_contact` takes, ``solvers`` its solver
-    fields for steps of ``dt``, ``dt``/2, … (one per level of halving the scene allows, and one more),
-    ``projection`` (F, D, 3) rod coordinates from world vectors; ``body`` the free body's arrays, or None for a fixed
-    object; ``work`` the scratch (:class:`StepWork`).
+def step_batch(first, n_steps, dt, times, currents, state, rods, terms, solvers, geometry, projection, body,
+               interval, work):
+    """Steps ``first`` … ``n_steps`` − 1 of length ``dt`` [s] of every running gripper, from and into ``state``
+    (:class:`WorkingState`), starting at the batch times ``times`` (n_steps + 1,) [s], with the current at every
+    gripper from ``currents`` (:class:`~..kernels.current.CurrentArrays`); ramps and sums into ``interval``
+    (:class:`Interval`). ``rods`` (with ``state``'s frames in 3-D), ``terms`` and ``geometry`` are the plain fields
+    that :func:`~.corrector.solve_with_contact` takes, ``solvers`` its solver fields for steps of ``dt``, ``dt``/2, …
+    (one per level of halving the scene allows, and one more), ``projection`` (R, D, 3) rod coordinates from world
+    vectors; ``body`` the free bodies' arrays, or None for a fixed object; ``work`` the scratch (:class:`StepWork`).
 
-    A step the gripper does not settle is taken again in halves (module docstring); one that fails even so stops the
-    gripper with the state from before it. Returns the index of the step after the last one taken. The CPU runs
-    this for each gripper in turn (:func:`take_steps`), the GPU for one gripper per thread."""
+    A step that a gripper does not settle is halved: in place in a batch of one, else left ``pending`` (module
+    docstring); a batch of one whose gripper is ``pending`` on entry takes step ``first`` in halves. Returns the
+    index of the step where it stopped: ``n_steps`` when it took them all; a step that some running grippers of a
+    larger batch did not settle, which the others took and the ``pending`` ones (``interval.pending``) have still to
+    take; or a step that no gripper runs to take. The GPU runs this for one gripper per thread."""
     n_rods, n_nodes, stride = state.q.shape
     n_fingers = solvers[0][5]
+    n_grippers = n_rods // n_fingers
     dim = geometry[0].shape[1]
     planar = state.tangent.shape[0] == 0
     q_pred, new, water, water_acceleration, near = work.q_pred, work.new, work.water, work.water_acceleration, \
@@ -331,12 +284,19 @@ def gripper_steps(first, n_steps, dt, times, currents, state, rods, terms, solve
     ratio, residual, reaction, normal_reaction = work.ratio, work.residual, work.reaction, work.normal_reaction
     ok, most, every, start = work.ok, work.most, work.every, work.level_start
     gripper_water, water_end = work.gripper_water, work.water_acceleration  # the end's water, then its change
-    deepest = len(solvers) - 1 if interval.halve else 0
+    deepest = len(solvers) - 1
+    halve_here = n_grippers == 1 and interval.halve
+    resume = halve_here and interval.pending[0]  # a larger batch left this gripper's first step to be halved
+    interval.pending[:] = False
     for k in range(first, n_steps):
-        if not interval.running[0]:
+        if not interval.running.any():
             return k
         level = 0  # how many times the step being taken was halved
         start[0] = times[k]
+        if resume and k == first:
+            copy_gripper(state, 0, work.saved, 0, n_fingers)
+            start[1] = start[0]
+            level = 1
         done = 0  # of the step, in steps of dt / 2**deepest
         taken_iterations = 0
         while True:
@@ -344,7 +304,8 @@ def gripper_steps(first, n_steps, dt, times, currents, state, rods, terms, solve
             for _ in range(level):
                 h *= 0.5
             solver = solvers[level]
-            current_velocity(currents, 0, start[level], gripper_water[0])
+            for b in range(n_grippers):
+                current_velocity(currents, b, start[level], gripper_water[b])
             project_water(geometry[5], gripper_water, water)
             predict(state.q, state.velocity, state.acceleration, h, q_pred, new.q)
             for r in range(n_rods):  # element by element: the GPU build copies no array into another by slice
@@ -364,11 +325,12 @@ def gripper_steps(first, n_steps, dt, times, currents, state, rods, terms, solve
             holds = (new.held, new.hold_offset, projection, sliding, friction, measured, geometry[0], geometry[1],
                      geometry[2], geometry[3])
             if body is not None:
-                current_velocity(currents, 0, start[level] + h, water_end[0])
-                for d in range(3):
-                    new.body_position[0, d] = state.body_position[0, d] + h * state.body_velocity[0, d]
-                    new.body_angular_velocity[0, d] = h * state.body_angular_velocity[0, d]  # θ, the rotation
-                    water_acceleration[0, d] = (water_end[0, d] - gripper_water[0, d]) / h
+                for b in range(n_grippers):
+                    current_velocity(currents, b, start[level] + h, water_end[b])
+                    for d in range(3):
+                        new.body_position[b, d] = state.body_position[b, d] + h * state.body_velocity[b, d]
+                        new.body_angular_velocity[b, d] = h * state.body_angular_velocity[b, d]  # θ, the rotation
+                        water_acceleration[b, d] = (water_end[b, d] - gripper_water[b, d]) / h
             old = (state.body_position, state.body_velocity, state.body_orientation, state.body_angular_velocity)
             motion = (new.body_position, new.body_angular_velocity, new.body_orientation, old, gripper_water,
                       water_acceleration)  # (empty arrays for a fixed object, and not used)
@@ -376,35 +338,43 @@ def gripper_steps(first, n_steps, dt, times, currents, state, rods, terms, solve
                              result, work.corrector_work)
             finish(new.q, state.q, state.velocity, h, new.velocity, new.acceleration)
             if body is not None:
-                for d in range(3):
-                    new.body_velocity[0, d] = (new.body_position[0, d] - state.body_position[0, d]) / h
-                    new.body_angular_velocity[0, d] = new.body_angular_velocity[0, d] / h
+                for b in range(n_grippers):
+                    for d in range(3):
+                        new.body_velocity[b, d] = (new.body_position[b, d] - state.body_position[b, d]) / h
+                        new.body_angular_velocity[b, d] = new.body_angular_velocity[b, d] / h
             if not planar:
                 rod3d_update_frames(new.q, state.tangent, state.director, state.reference_twist, new.tangent,
                                     new.director, new.reference_twist, work.corrector_work.newton.elastic)
-            all_converged, resolved, finite = True, True, True
-            most[0] = 0
-            for r in range(n_rods):
-                all_converged = all_converged and converged[r]
-                resolved = resolved and not changed[r]
-                most[0] = max(most[0], iterations[r])
-                for i in range(n_nodes):
-                    for s in range(stride):
-                        finite = finite and math.isfinite(new.q[r, i, s]) and math.isfinite(new.velocity[r, i, s])
-            if body is not None:
-                for d in range(3):
-                    finite = finite and math.isfinite(new.body_position[0, d]) \
-                        and math.isfinite(new.body_velocity[0, d])
-            # as the adaptive path: a step not settled is halved; at the deepest level (and without halvings) it is
-            # kept if Newton converged
-            if not (all_converged and resolved) and level < deepest:  # again, as two halves from the same start
+            any_pending, again = False, False
+            for b in range(n_grippers):
+                all_converged, resolved, finite = True, True, True
+                most[b] = 0
+                for r in range(b * n_fingers, (b + 1) * n_fingers):
+                    all_converged = all_converged and converged[r]
+                    resolved = resolved and not changed[r]
+                    most[b] = max(most[b], iterations[r])
+                    for i in range(n_nodes):
+                        for s in range(stride):
+                            finite = finite and math.isfinite(new.q[r, i, s]) \
+                                and math.isfinite(new.velocity[r, i, s])
+                if body is not None:
+                    for d in range(3):
+                        finite = finite and math.isfinite(new.body_position[b, d]) \
+                            and math.isfinite(new.body_velocity[b, d])
+                # as the adaptive path: a step not settled is halved, or at the deepest level (and without
+                # halvings) kept if Newton converged
+                settled = all_converged and resolved
+                again = halve_here and not settled and level < deepest
+                interval.pending[b] = interval.running[b] and interval.halve and not settled and not halve_here
+                any_pending = any_pending or interval.pending[b]
+                ok[b] = all_converged and not interval.pending[b] and not again and finite
+            if again:  # a batch of one takes the step again as two halves, from the state it started from
                 if level == 0:
                     copy_gripper(state, 0, work.saved, 0, n_fingers)
                 start[level + 1] = start[level]
                 level += 1
                 continue
-            ok[0] = all_converged and finite
-            if level > 0:
+            if halve_here and level > 0:
                 if not ok[0]:  # a half step failed: the gripper stops at the state before the whole step
                     copy_gripper(work.saved, 0, state, 0, n_fingers)
                     commit_step(dt, every, ok, new, most, normal_reaction, reaction, state, interval)
@@ -427,6 +397,8 @@ def gripper_steps(first, n_steps, dt, times, currents, state, rods, terms, solve
             contact_reactions(new.q, residual, new.held, friction, geometry[0], geometry[1], geometry[5], reaction,
                               normal_reaction)
             commit_step(dt, every, ok, new, most, normal_reaction, reaction, state, interval)
+            if any_pending:  # the others took the step; the pending ones keep their state for the adaptive path
+                return k
             break
     return n_steps
 
@@ -441,5 +413,5 @@ with_motion = none_or(_with_motion)
 compiles: :mod:`~..kernels.typed_none`)."""
 
 
-__all__ = ["WorkingState", "Interval", "StepWork", "step_work", "copy_gripper", "commit_step",
-           "take_steps", "gripper_views", "gripper_body", "gripper_steps"]
+__all__ = ["WorkingState", "N_ROD_FIELDS", "Interval", "StepWork", "step_work", "copy_gripper", "commit_step",
+           "take_steps", "step_batch"]
