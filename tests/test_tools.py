@@ -445,5 +445,5 @@ def test_the_gpu_session_script_parses_and_refuses_an_unknown_part(tmp_path):
     out = tmp_path / "gpu"
     run = subprocess.run(["bash", str(script), "sideways"], capture_output=True, text=True,
                          env={**os.environ, "OUT": str(out)})
-    assert run.returncode == 2 and "usage: bash tools/gpu_session.sh speed|outcomes" in run.stderr
+    assert run.returncode == 2 and "usage: bash tools/gpu_session.sh speed|outcomes|tests" in run.stderr
     assert not out.exists()

@@ -1,20 +1,23 @@
 #!/usr/bin/env bash
-# The GPU back end's checks and figures in one run on a machine with an NVIDIA GPU, for a developer with a few
-# minutes of a lent GPU (issue 47): run from the repository root, results written under $OUT (default out/gpu).
+# The GPU back end's checks and figures on a machine with an NVIDIA GPU, for a developer with a few minutes of a lent
+# GPU (issue 47): run from the repository root, results written under $OUT (default out/gpu).
 #
-#   bash tools/gpu_session.sh speed      # ~10 min: compile, GPU-only tests, benchmarks/gpu_speed.py (JSON + plot)
-#   bash tools/gpu_session.sh outcomes   # ~10 min: benchmarks/gpu_outcomes.py, both parts, 1,000 seeds per model
+#   bash tools/gpu_session.sh speed      # benchmarks/gpu_speed.py, 3-D first (JSON + plot; its "agreement" stage
+#                                        #   is the 1 s GPU-against-CPU trajectory check)
+#   bash tools/gpu_session.sh outcomes   # benchmarks/gpu_outcomes.py, both parts, 1,000 seeds per model
+#   bash tools/gpu_session.sh tests      # the tests marked gpu
 #
-# The machine needs python3 with numpy, numba and numba-cuda (and scipy, matplotlib, tqdm); packages it lacks
-# (gymnasium for the env, from this project's dependencies) can come as wheels in .whl/, installed into
-# /tmp/site. The CPU kernels compile from an empty cache there (minutes on one core), so the first stage warms the
-# cache with one process per entry point, side by side on the machine's cores. Each stage stops itself before the
-# device tool's 10-minute limit (GPU_SESSION_BUDGET_S, default 540 s) and keeps what it has written.
+# Each part is one Python process after the warm-up, because the CUDA kernels are compiled in the process that
+# launches them (a minute or more each, not kept on disk) while the CPU kernels are cached on disk: the warm-up
+# compiles those from an empty cache with one process per model side by side on the machine's cores. The machine
+# needs python3 with numpy, numba and numba-cuda (and scipy, matplotlib, tqdm); packages it lacks (gymnasium, from
+# this project's dependencies) can come as wheels in .whl/, installed into /tmp/site. Each part stops itself before
+# the device tool's 10-minute limit (GPU_SESSION_BUDGET_S, default 540 s) and keeps what it has written.
 set -uo pipefail
 
 part="${1:-}"
-if [[ "$part" != speed && "$part" != outcomes ]]; then
-    echo "usage: bash tools/gpu_session.sh speed|outcomes (results under \$OUT, default out/gpu)" >&2
+if [[ "$part" != speed && "$part" != outcomes && "$part" != tests ]]; then
+    echo "usage: bash tools/gpu_session.sh speed|outcomes|tests (results under \$OUT, default out/gpu)" >&2
     exit 2
 fi
 OUT="${OUT:-out/gpu}"
@@ -41,8 +44,8 @@ for name in ("numpy", "numba", "numba_cuda", "scipy", "matplotlib", "gymnasium",
         print(name, "missing:", error)
 EOF
 
-warm() {  # one process per entry point, side by side: the env in each model, and the GPU's kernels
-    log "warming the kernels' caches"
+warm() {  # the CPU kernels, cached on disk: the env in each model, side by side
+    log "warming the CPU kernels' cache"
     local pids=()
     for model in 3d planar; do
         python3 -c "
@@ -50,24 +53,14 @@ import gymnasium as gym, numpy as np, soft_gripper_env
 env = gym.make('SoftGripperUnderwater-v0', model='$model'); env.reset(seed=0); env.step(np.zeros(3))" \
             > "$OUT/warm_env_$model.log" 2>&1 &
         pids+=($!)
-        python3 -c "
-import numpy as np, soft_gripper_env
-from soft_gripper_env.env import SoftGripperUnderwaterVectorEnv
-env = SoftGripperUnderwaterVectorEnv(2, model='$model', device='cuda'); env.reset(seed=0); env.step(np.zeros((2, 3)))" \
-            > "$OUT/warm_cuda_$model.log" 2>&1 &
-        pids+=($!)
     done
     for pid in "${pids[@]}"; do wait "$pid" || log "a warming process failed (see $OUT/warm_*.log)"; done
-    log "caches warm"
+    log "cache warm"
 }
 
 case "$part" in
 speed)
     warm
-    log "GPU-only tests"
-    timeout "$(left)" python3 -m pytest -q -p no:cacheprovider -m gpu tests/physics/test_gpu.py \
-        > "$OUT/gpu_tests.log" 2>&1
-    log "tests: $(tail -n 1 "$OUT/gpu_tests.log")"
     log "benchmarks/gpu_speed.py"
     # 3-D first (the default model, the issue's first goal); the JSON is written after every stage
     timeout "$(left)" python3 -m benchmarks.gpu_speed --json "$OUT/gpu_speed.json" --plot "$OUT/gpu_speed.png" \
@@ -75,6 +68,13 @@ speed)
         --intervals 3 \
         > "$OUT/gpu_speed.log" 2>&1
     log "gpu_speed: exit $? (the JSON keeps every stage it finished)"
+    ;;
+tests)
+    warm
+    log "the tests marked gpu"
+    timeout "$(left)" python3 -m pytest -q -p no:cacheprovider -m gpu tests/physics/test_gpu.py \
+        > "$OUT/gpu_tests.log" 2>&1
+    log "tests: $(tail -n 1 "$OUT/gpu_tests.log")"
     ;;
 outcomes)
     warm
