@@ -11,8 +11,8 @@ as they end:
 
 - **GPU speed** for each of ``--sizes`` envs: env steps per second over ``--steps`` actions after a first one (whose
   time, less a later one's, is mostly the kernels' compile), and the share of that time spent in the physics
-  (``Simulator.advance``: copies to and from the device, the kernel with any halved steps) against the task's
-  own work on the host;
+  (``Simulator.advance``) against the task's own work on the host, with the physics' shares split into the copies to
+  the device, the kernel (halved steps included) and the copies back (``gpu_phase_shares``);
 - **the CPU anchor, in the same run**: ``make_vec(64)`` on one thread with the same controller, and the ratio of
   each GPU figure to it.
 
@@ -200,18 +200,24 @@ def grasp_speed(model: str, num_envs: int, steps: int, controller: str, device: 
 
     seconds, in_physics = [], []
     ended = 0
-    for _ in range(steps + 1):
+    phases = None
+    for step in range(steps + 1):
+        if step == 1 and batch.sim._gpu is not None:  # the GPU's phases, counted from after the first (compiling) step
+            phases = dict(batch.sim._gpu.seconds)
         begin, physics_before = time.perf_counter(), physics[0]
         observation, _, terminated, truncated, _ = env.step(act(observation))
         seconds.append(time.perf_counter() - begin)
         in_physics.append(physics[0] - physics_before)
         ended += int(np.sum(terminated | truncated))
-    env.close()
     first, timed = seconds[0], np.array(seconds[1:])
     total = float(timed.sum())
-    return {"envs": num_envs, "controller": controller, "steps": steps, "setup_s": setup, "first_step_s": first,
-            "compile_s": float(first - timed.min()), "env_steps_per_s": num_envs * steps / total,
-            "physics_share": float(np.sum(in_physics[1:]) / total), "episodes_ended": ended}
+    result = {"envs": num_envs, "controller": controller, "steps": steps, "setup_s": setup, "first_step_s": first,
+              "compile_s": float(first - timed.min()), "env_steps_per_s": num_envs * steps / total,
+              "physics_share": float(np.sum(in_physics[1:]) / total), "episodes_ended": ended}
+    if phases is not None:  # where an action's time goes: copies to the device, the kernel, copies back
+        result["gpu_phase_shares"] = {name: (batch.sim._gpu.seconds[name] - phases[name]) / total for name in phases}
+    env.close()
+    return result
 
 
 def plot(results: dict, path: Path) -> None:

@@ -225,7 +225,8 @@ def test_kernels_compile_to_ptx_for_sm_90():
 @needs_numba_cuda
 def test_gpu_speed_benchmark_runs_in_the_simulator(tmp_path):
     """The benchmark a lent GPU runs, end to end on two envs in Numba's CUDA simulator (no speed is meant): both
-    workloads and controllers write their figures, the grasp runs end as the CPU's and the plot is drawn."""
+    workloads and controllers write their figures (the grasp's split of the physics into copies and kernel too), the
+    grasp runs end as the CPU's and the plot is drawn."""
     out = tmp_path / "gpu_speed.json"
     run = _python(f"""
     from benchmarks.gpu_speed import main
@@ -239,6 +240,10 @@ def test_gpu_speed_benchmark_runs_in_the_simulator(tmp_path):
     assert set(grasp["cpu"]) == {"random", "reactive"}
     assert [(g["envs"], g["controller"]) for g in grasp["gpu"]] == [(2, "random"), (2, "reactive")]
     assert all(g["env_steps_per_s"] > 0 and 0 < g["physics_share"] <= 1 for g in grasp["gpu"])
+    for g in grasp["gpu"]:  # the physics' time split into copies and the kernel, within the physics' share
+        phases = g["gpu_phase_shares"]
+        assert set(phases) == {"upload", "kernel", "download"} and phases["kernel"] > 0
+        assert sum(phases.values()) <= g["physics_share"] + 1e-9
     assert planar["agreement"]["max_position_difference_m"] == 0.0  # the simulator runs the CPU's code
     assert (tmp_path / "gpu_speed.png").stat().st_size > 0
 

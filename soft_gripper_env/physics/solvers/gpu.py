@@ -34,6 +34,7 @@ import importlib
 import math
 import os
 import sys
+import time
 from contextlib import contextmanager
 from typing import NamedTuple
 
@@ -377,11 +378,10 @@ class GpuRods:
         self.rods = _on_device(self.cuda, design[:FINGERS_FIELD], False) + (
             (float(fingers[0]), float(fingers[1])) + _on_device(self.cuda, fingers[2:], False),)
         self.terms = _on_device(self.cuda, tuple(terms), False)
-        solver_arrays = SolverArrays(*solver)
-        one_gripper = solver_arrays._replace(tolerance_inverse=solver_arrays.tolerance_inverse[:shape.n_fingers],
-                                             clamp_free=solver_arrays.clamp_free[:shape.n_fingers])
-        self.solver = _on_device(self.cuda, tuple(one_gripper), False)
+        self.solver = _on_device(self.cuda, for_one_gripper(solver, shape.n_fingers), False)
         self.directions = _on_device(self.cuda, np.ascontiguousarray(finger_directions, dtype=float), False)
+        self.seconds = _phases()
+        """Wall seconds spent in each phase of the advances so far (:func:`_phases`)."""
 
     def arguments(self, state: tuple, gripper_water: np.ndarray, natural_curvature: np.ndarray, rate: np.ndarray,
                   curvature_range: tuple[float, float], running: np.ndarray, failed: np.ndarray, clock: np.ndarray,
@@ -406,9 +406,11 @@ class GpuRods:
         by ``rate`` (R,) [1/s] within ``curvature_range``. Every other array is the host's and is updated in place:
         ``state`` (q, velocity, acceleration (R, N, S), tangent, director (R, N − 1, 3), reference twist (R, N)),
         κ̄ (R,), ``running``, ``failed`` (B,) bool, ``clock`` (B,) [s], ``iterations`` (B,) int."""
+        begin = time.perf_counter()
         arguments, host, device = self.arguments(state, gripper_water, natural_curvature, rate, curvature_range,
                                                  running, failed, clock, iterations, dt, n_steps)
-        _launch(rods_kernel(self.shape), running.shape[0], arguments, host, device)
+        self.seconds["upload"] += time.perf_counter() - begin
+        _launch(self.cuda, rods_kernel(self.shape), running.shape[0], arguments, host, device, self.seconds)
 
 
 class GraspKernelShape(NamedTuple):
@@ -579,6 +581,8 @@ class GpuGrasp:
         self.terms = _on_device(self.cuda, terms)
         self.solvers = _on_device(self.cuda, tuple(for_one_gripper(solver, F) for solver in solvers))
         self.projection = _on_device(self.cuda, projection[:F])
+        self.seconds = _phases()
+        """Wall seconds spent in each phase of the advances so far (:func:`_phases`)."""
 
     def arguments(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, times: np.ndarray,
                   currents: tuple, stops: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, list, list]:
@@ -608,10 +612,12 @@ class GpuGrasp:
         ``state`` (:class:`~.stepping.WorkingState`'s fields) and ``interval`` (:class:`~.stepping.Interval`'s) are
         the host's and are updated in place. Returns the step where each gripper stopped (B,): ``n_steps``, or the
         step after a failed one."""
+        begin = time.perf_counter()
         stops = np.zeros(interval[4].shape[0], dtype=np.int64)
         arguments, written, device = self.arguments(state, geometry, body, interval, times, currents, stops, dt,
                                                     n_steps)
-        _launch(grasp_kernel(self.shape), stops.shape[0], arguments, written, device)
+        self.seconds["upload"] += time.perf_counter() - begin
+        _launch(self.cuda, grasp_kernel(self.shape), stops.shape[0], arguments, written, device, self.seconds)
         return stops
 
 
@@ -650,15 +656,27 @@ def _on_device(cuda, value, placeholder: bool = True):
     return cuda.to_device(array)
 
 
-def _launch(kernel, n_grippers: int, arguments: tuple, host: list, device: list) -> None:
-    """Launches ``kernel`` with a thread per gripper and copies each array it writes back into its ``host`` array
-    (from its ``device`` copy; in the simulator they are the same arrays)."""
+def _phases() -> dict[str, float]:
+    """A count of an advance's phases in wall seconds: ``upload`` (the arguments made and copied to the device),
+    ``kernel`` (launch to completion; a kernel's first launch includes its compile) and ``download`` (the arrays it
+    wrote copied back)."""
+    return {"upload": 0.0, "kernel": 0.0, "download": 0.0}
+
+
+def _launch(cuda, kernel, n_grippers: int, arguments: tuple, host: list, device: list, seconds: dict) -> None:
+    """Launches ``kernel`` with a thread per gripper, waits for it, and copies each array it writes back into its
+    ``host`` array (from its ``device`` copy; in the simulator they are the same arrays), adding each phase's wall
+    time to ``seconds`` (:func:`_phases`)."""
+    begin = time.perf_counter()
     blocks = (n_grippers + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
     if getattr(kernel, "overloads", None):  # compiled (at its first launch): no scan of the modules per action
         kernel[blocks, THREADS_PER_BLOCK](*arguments)
     else:
         with calls_kept_apart():
             kernel[blocks, THREADS_PER_BLOCK](*arguments)
+    cuda.synchronize()
+    copied = time.perf_counter()
+    seconds["kernel"] += copied - begin
     for array, on_device in zip(host, device, strict=True):
         if not array.size or on_device is array:
             continue
@@ -666,6 +684,7 @@ def _launch(kernel, n_grippers: int, arguments: tuple, host: list, device: list)
             array[...] = on_device
         else:
             on_device.copy_to_host(array)
+    seconds["download"] += time.perf_counter() - copied
 
 
 def rods_ptx(constants: tuple, state: tuple, n_grippers: int, compute_capability: tuple[int, int] = (9, 0)) -> str:
