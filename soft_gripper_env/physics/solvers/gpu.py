@@ -42,6 +42,7 @@ import numpy as np
 from numba.core import types
 
 from ..kernels.assembly import FINGERS_FIELD, N_DESIGN_FIELDS, StepInputs, named_rods
+from ..kernels.body import N_BODY_ARRAYS
 from ..kernels.compiled import kernel
 from ..kernels.current import CurrentBatch
 from ..kernels.finger_contact import finger_scratch_size
@@ -595,7 +596,7 @@ class GpuGrasp:
         device_interval = [written_at[i] if i in written_at else _on_device(self.cuda, x)
                            for i, x in enumerate(interval)]
         if body is None:  # a fixed object: a placeholder the kernel does not read
-            body = tuple(np.zeros(n_grippers) for _ in range(14)) + (0.0, 0.0, 0.0, 0.0)
+            body = tuple(np.zeros(n_grippers) for _ in range(N_BODY_ARRAYS)) + (0.0, 0.0, 0.0, 0.0)
         arguments = (tuple(device[:n_state]), self.rods, self.terms, self.solvers,
                      (_on_device(self.cuda, tuple(geometry)), self.projection),
                      _on_device(self.cuda, tuple(body)),
