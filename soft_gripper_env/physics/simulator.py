@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .kernels.assembly import N_DESIGN_FIELDS, RodArrays, StepInputs, assemble
-from .kernels.body import N_BODY_ARRAYS, BodyArrays, BodyMotion, BodyState, palm_reactions
+from .kernels.body import BodyArrays, BodyMotion, BodyState, palm_reactions
 from .kernels.contact import contact_reactions, object_in_rod_frames
 from .kernels.current import CurrentBatch
 from .kernels.finger_contact import FingerContact, find_near_fingers, finger_scratch
@@ -57,7 +57,7 @@ from .solvers.records import (
     record,
     take_grippers,
 )
-from .solvers.stepping import N_ROD_FIELDS, Interval, WorkingState, commit_step, take_steps
+from .solvers.stepping import Interval, WorkingState, commit_step, gripper_body, gripper_views, take_steps
 
 
 class BodyModel:
@@ -478,24 +478,15 @@ class Simulator:
         F = self.n_fingers
         solvers = tuple(for_one_gripper(solver, F) for solver in self._halving_levels(dt))
         projection = self._projection[:F]
+        counts = (F if work.hold_offset.shape[0] else 0, F if work.tangent.shape[0] else 0,
+                  1 if work.body_position.shape[0] else 0, 1 if self._geometry.any_motion.shape[0] else 0)
         for b in grippers:
-            rods, one = slice(b * F, (b + 1) * F), slice(b, b + 1)
-            state = WorkingState(*(x[rods] for x in work[:N_ROD_FIELDS]), *(x[one] for x in work[N_ROD_FIELDS:]))
+            state, geometry, own, currents = gripper_views(b, F, *counts, work, self._plain_geometry, interval,
+                                                           self._kernel_currents)
             rod_arrays = self._plain_rods if state.tangent.size == 0 else \
                 self._plain_rods[:N_DESIGN_FIELDS] + (state.tangent, state.director, state.reference_twist)
-            starts, ends, radii, finger_radius, friction, directions, plane_normals, any_motion = \
-                self._plain_geometry
-            geometry = (starts[rods], ends[rods], radii[rods], finger_radius, friction[rods], directions,
-                        plane_normals, any_motion[one])
-            own_body = None if body is None else tuple(x[one] for x in body[:N_BODY_ARRAYS]) + body[N_BODY_ARRAYS:]
-            own = interval._replace(natural_curvature=interval.natural_curvature[rods],
-                                    curvature_rate=interval.curvature_rate[rods], running=interval.running[one],
-                                    failed=interval.failed[one], clock=interval.clock[one],
-                                    newton_iterations=interval.newton_iterations[one],
-                                    normal_impulse=interval.normal_impulse[rods], impulse=interval.impulse[rods],
-                                    pending=interval.pending[one])
-            take_steps(k, k + 1, dt, step_times, tuple(x[one] for x in self._kernel_currents), state, rod_arrays,
-                       self._plain_terms, solvers, geometry, projection, own_body, own)
+            take_steps(k, k + 1, dt, step_times, currents, state, rod_arrays, self._plain_terms, solvers, geometry,
+                       projection, None if body is None else gripper_body(body, b), own)
 
     def _commit(self, grippers: np.ndarray, ok: np.ndarray, iterations: np.ndarray, result: StepResult, dt: float,
                 work: WorkingState, interval: Interval) -> None:

@@ -53,7 +53,7 @@ from ..scene.forces import ForceTerms
 from ..scene.scene import STEP_HALVINGS_LIMIT
 from .corrector import CorrectorWork
 from .newton import NewtonWork, SolverArrays, SolveResult, for_one_gripper, step_gripper_rods
-from .stepping import Interval, StepWork, WorkingState, step_batch
+from .stepping import StepWork, WorkingState, gripper_body, gripper_views, step_batch
 
 THREADS_PER_BLOCK = 64
 """CUDA threads (grippers) per block: each thread holds tens of kilobytes of local arrays, so small blocks keep
@@ -456,6 +456,7 @@ def _build_grasp_kernel(shape: GraspKernelShape):
     framed = F if three_d else 0
     held_by_body = F if free else 0
     bodies = 1 if free else 0
+    moving = 1 if free and three_d else 0  # a 3-D free body's admissible motions
     contact_fingers = F if shape.finger_contact else 0
     elastic_size = elastic_scratch_size(N if three_d else 0)
     finger_size = finger_scratch_size(contact_fingers, N)
@@ -469,35 +470,13 @@ def _build_grasp_kernel(shape: GraspKernelShape):
         if b >= running.shape[0]:
             return
         times, currents, stops, dt, n_steps = timing
-        first = b * F
-        last = first + F
-        q, velocity, acceleration, held, hold_offset, tangent, director, twist, position, body_velocity, \
-            orientation, angular_velocity = state
-        # the gripper's own rods and body: views of the batch's arrays
-        own = WorkingState(q[first:last], velocity[first:last], acceleration[first:last], held[first:last],
-                           hold_offset[first:first + held_by_body], tangent[first:first + framed],
-                           director[first:first + framed], twist[first:first + framed],
-                           position[b:b + bodies], body_velocity[b:b + bodies], orientation[b:b + bodies],
-                           angular_velocity[b:b + bodies])
-        natural_curvature, rate, low, high, _, failed, clock, iterations, normal_impulse, impulse, pending, \
-            halve = interval
-        own_interval = Interval(natural_curvature[first:last], rate[first:last], low, high, running[b:b + 1],
-                                failed[b:b + 1], clock[b:b + 1], iterations[b:b + 1], normal_impulse[first:last],
-                                impulse[first:last], pending[b:b + 1], halve)
         geometry, projection = geometry_projection
-        starts, ends, radii, finger_radius, friction, directions, plane_normals, any_motion = geometry
-        own_geometry = (starts[first:last], ends[first:last], radii[first:last], finger_radius, friction[first:last],
-                        directions, plane_normals, any_motion[b:b + (1 if free and three_d else 0)])
-        if three_d:
-            rods = rods_design + (own.tangent, own.director, own.reference_twist)
-        else:
-            rods = rods_design + (tangent[:0], director[:0], twist[:0])
+        own, own_geometry, own_interval, own_currents = gripper_views(b, F, held_by_body, framed, bodies, moving,
+                                                                      state, geometry, interval, currents)
+        rods = rods_design + (own.tangent, own.director, own.reference_twist)  # empty views in the planar model
         own_body = None
         if free:
-            own_body = (body[0][b:b + 1], body[1][b:b + 1], body[2][b:b + 1], body[3][b:b + 1], body[4][b:b + 1],
-                        body[5][b:b + 1], body[6][b:b + 1], body[7][b:b + 1], body[8][b:b + 1], body[9][b:b + 1],
-                        body[10][b:b + 1], body[11][b:b + 1], body[12][b:b + 1], body[13][b:b + 1], body[14],
-                        body[15], body[16], body[17])
+            own_body = gripper_body(body, b)
         # the scratch (stepping.step_work's, for one gripper), in the thread's own arrays
         flags = cuda.local.array((8, F), boolean)
         node_flags = cuda.local.array((7, F, N), boolean)
@@ -556,8 +535,6 @@ def _build_grasp_kernel(shape: GraspKernelShape):
                         counts[1], counts[2], ratios[2], cuda.local.array((F, n), float64),
                         cuda.local.array((F, N, 3), float64), cuda.local.array((F, N), float64),
                         cuda.local.array(1, boolean), cuda.local.array(1, int64), gripper, corrector)
-        own_currents = (currents[0][b:b + 1], currents[1][b:b + 1], currents[2][b:b + 1], currents[3][b:b + 1],
-                        currents[4][b:b + 1], currents[5][b:b + 1], currents[6][b:b + 1], currents[7][b:b + 1])
         stops[b] = step_batch(0, n_steps, dt, times, own_currents, own, rods, terms, solvers, own_geometry,
                               projection, own_body, own_interval, work)
 

@@ -67,10 +67,6 @@ class WorkingState(NamedTuple):
     """[rad/s], (B, 3)."""
 
 
-N_ROD_FIELDS = WorkingState._fields.index("body_position")
-"""How many of :class:`WorkingState`'s fields are per rod (the body's, per gripper, follow them)."""
-
-
 class Interval(NamedTuple):
     """What a run of steps ramps and sums per gripper, in place."""
 
@@ -403,6 +399,42 @@ def step_batch(first, n_steps, dt, times, currents, state, rods, terms, solvers,
     return n_steps
 
 
+@kernel(python=True)  # the host's halving and the CUDA simulator's threads call it from Python
+def gripper_views(b, n_fingers, held_by_body, framed, bodies, moving, state, geometry, interval, currents):
+    """Gripper ``b``'s rows of a batch, as a batch of one (views): its :class:`WorkingState`, contact geometry,
+    :class:`Interval` and currents, from the batch's (those bundles, or their fields as plain tuples).
+    ``held_by_body``, ``framed``, ``bodies`` and ``moving`` are how many rows of hold offsets, 3-D frames, bodies and
+    admissible motions a gripper has (``n_fingers`` or 0; 1 or 0), given rather than read from the arrays, since on
+    the GPU an array a scene lacks is one placeholder row."""
+    first, last = b * n_fingers, (b + 1) * n_fingers
+    q, velocity, acceleration, held, hold_offset, tangent, director, twist, position, body_velocity, orientation, \
+        angular_velocity = state
+    own = WorkingState(q[first:last], velocity[first:last], acceleration[first:last], held[first:last],
+                       hold_offset[first:first + held_by_body], tangent[first:first + framed],
+                       director[first:first + framed], twist[first:first + framed], position[b:b + bodies],
+                       body_velocity[b:b + bodies], orientation[b:b + bodies], angular_velocity[b:b + bodies])
+    starts, ends, radii, finger_radius, friction, directions, plane_normals, any_motion = geometry
+    own_geometry = (starts[first:last], ends[first:last], radii[first:last], finger_radius, friction[first:last],
+                    directions, plane_normals, any_motion[b:b + moving])
+    natural_curvature, rate, low, high, running, failed, clock, iterations, normal_impulse, impulse, pending, \
+        halve = interval
+    own_interval = Interval(natural_curvature[first:last], rate[first:last], low, high, running[b:b + 1],
+                            failed[b:b + 1], clock[b:b + 1], iterations[b:b + 1], normal_impulse[first:last],
+                            impulse[first:last], pending[b:b + 1], halve)
+    own_currents = (currents[0][b:b + 1], currents[1][b:b + 1], currents[2][b:b + 1], currents[3][b:b + 1],
+                    currents[4][b:b + 1], currents[5][b:b + 1], currents[6][b:b + 1], currents[7][b:b + 1])
+    return own, own_geometry, own_interval, own_currents
+
+
+@kernel(python=True)  # the host's halving and the CUDA simulator's threads call it from Python
+def gripper_body(body, b):
+    """Gripper ``b``'s row of the free bodies' arrays (:class:`~..kernels.body.BodyArrays`' fields)."""
+    return (body[0][b:b + 1], body[1][b:b + 1], body[2][b:b + 1], body[3][b:b + 1], body[4][b:b + 1],
+            body[5][b:b + 1], body[6][b:b + 1], body[7][b:b + 1], body[8][b:b + 1], body[9][b:b + 1],
+            body[10][b:b + 1], body[11][b:b + 1], body[12][b:b + 1], body[13][b:b + 1], body[14], body[15],
+            body[16], body[17])
+
+
 @kernel
 def _with_motion(body, motion):
     return body, motion
@@ -413,5 +445,5 @@ with_motion = none_or(_with_motion)
 compiles: :mod:`~..kernels.typed_none`)."""
 
 
-__all__ = ["WorkingState", "N_ROD_FIELDS", "Interval", "StepWork", "step_work", "copy_gripper", "commit_step",
-           "take_steps", "step_batch"]
+__all__ = ["WorkingState", "Interval", "StepWork", "step_work", "copy_gripper", "commit_step", "take_steps",
+           "step_batch", "gripper_views", "gripper_body"]
