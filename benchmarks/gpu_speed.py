@@ -203,7 +203,7 @@ def grasp_speed(model: str, num_envs: int, steps: int, controller: str, device: 
     phases = None
     for step in range(steps + 1):
         if step == 1 and batch.sim._gpu is not None:  # the GPU's phases, counted from after the first (compiling) step
-            phases = dict(batch.sim._gpu.seconds)
+            phases, moved = dict(batch.sim._gpu.seconds), dict(batch.sim._gpu.state.bytes)
         begin, physics_before = time.perf_counter(), physics[0]
         observation, _, terminated, truncated, _ = env.step(act(observation))
         seconds.append(time.perf_counter() - begin)
@@ -216,6 +216,9 @@ def grasp_speed(model: str, num_envs: int, steps: int, controller: str, device: 
               "physics_share": float(np.sum(in_physics[1:]) / total), "episodes_ended": ended}
     if phases is not None:  # where an action's time goes: copies to the device, the kernel, copies back
         result["gpu_phase_shares"] = {name: (batch.sim._gpu.seconds[name] - phases[name]) / total for name in phases}
+        # the state's bytes each way per env step: the state stays on the device, so uploads are new episodes' rows
+        result["state_bytes_per_env_step"] = {
+            name: (batch.sim._gpu.state.bytes[name] - moved[name]) / (num_envs * steps) for name in moved}
     env.close()
     return result
 

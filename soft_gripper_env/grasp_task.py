@@ -31,7 +31,6 @@ from .physics import (
     fluid_forces,
     paper_finger,
     paper_scene,
-    put_grippers,
     take_grippers,
     without_material_damping,
 )
@@ -463,11 +462,11 @@ class GraspBatch:
         self.natural_curvature = np.zeros((B, F))
         """κ̄ of every finger (dimensionless)."""
         self.normal_force = np.zeros((B, F, task.gripper.finger.n_nodes))
+        """Compressive reaction of the object on every node, averaged over the last control interval [N]: stick
+        contact makes the reaction of a single physics step impulsive, its mean over the interval is not."""
         self.contact_force = np.zeros((B, F, task.gripper.finger.n_nodes, 3))
         """The object's mean force on each node over the last control interval, normal reaction and friction, world
         frame [N], (B, F, N, 3)."""
-        """Compressive reaction of the object on every node, averaged over the last control interval [N]: stick
-        contact makes the reaction of a single physics step impulsive, its mean over the interval is not."""
         self.hold_time = np.zeros(B)
         """How long each object has been held without a break [s]."""
         self.fragile_force = np.full(B, np.inf)
@@ -516,10 +515,7 @@ class GraspBatch:
         else:  # the others run on: the new episodes' clocks start at the batch's present time
             for index, scene in zip(indices, scenes, strict=True):
                 self.sim.set_scene(int(index), scene, start_time=self.state.time)
-            fresh = take_grippers(self.sim.initial_state(), indices)
-            if self.state.acceleration is not None:  # zero: the same Newton start as a fresh state's None
-                fresh = replace(fresh, acceleration=np.zeros_like(fresh.q))
-            self.state = put_grippers(self.state, indices, fresh)
+            self.state = self.sim.put_grippers(self.state, indices, take_grippers(self.sim.initial_state(), indices))
         self.natural_curvature[indices] = 0.0
         self.normal_force[indices] = 0.0
         self.contact_force[indices] = 0.0

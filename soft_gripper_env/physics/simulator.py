@@ -57,7 +57,15 @@ from .solvers.records import (
     record,
     take_grippers,
 )
-from .solvers.stepping import Interval, WorkingState, commit_step, gripper_body, gripper_views, take_steps
+from .solvers.stepping import (
+    N_ROD_STATE_FIELDS,
+    Interval,
+    WorkingState,
+    commit_step,
+    gripper_body,
+    gripper_views,
+    take_steps,
+)
 
 
 class BodyModel:
@@ -158,8 +166,9 @@ class Simulator:
     def __init__(self, scene: Scene | Sequence[Scene], batch_size: int | None = None, device: str = "cpu") -> None:
         self.device = check_device(device)
         """Where :meth:`advance` steps the batch: "cpu", or "cuda" (:mod:`.solvers.gpu`: rods on their own, or
-        grasping a fixed or free object, with the backward-Euler integrator; a step to be halved, and every other
-        call, runs on the CPU)."""
+        grasping a fixed or free object, with the backward-Euler integrator; every other call runs on the CPU).
+        On the GPU the state stays on the device between calls: :meth:`advance` returns a state whose arrays are
+        read-only copies, and given that state back (or what :meth:`put_grippers` made of it) uploads nothing."""
         scenes = [scene] if isinstance(scene, Scene) else list(scene)
         if not scenes or not all(isinstance(s, Scene) for s in scenes):
             raise ValueError("Simulator.scene must be a Scene or a non-empty sequence of Scenes")
@@ -240,6 +249,9 @@ class Simulator:
                 raise GpuUnsupported(f"Simulator(device='cuda'): the integrator {scene.integrator!r} does not run "
                                      f"on the GPU yet; backward_euler does")
             self._gpu = (GpuGrasp if self._has_object else GpuRods)(*self.gpu_constants())
+        self._on_device: RodState | None = None
+        """The state whose values the GPU holds: the last one :meth:`advance` or
+        :meth:`put_grippers` returned, whose arrays are read-only so that it cannot change on the host alone."""
 
     def set_scene(self, index: int, scene: Scene, start_time: float = 0.0) -> None:
         """Gives gripper ``index`` another scene, which may differ from the batch's only in the grasped object's
@@ -389,14 +401,14 @@ class Simulator:
                             np.zeros(B, dtype=bool), clock, np.zeros(B, dtype=np.int64),
                             np.zeros((R, self.disc.n_nodes)), np.zeros((R, self.disc.n_nodes, 3)),
                             np.zeros(B, dtype=bool), self.scene.newton.max_step_halvings > 0)
-        work = self._working_state(state, copy=True)
         dt = self.scene.time_step
         times = [state.time]
         for _ in range(n_steps):
             times.append(times[-1] + dt)  # the clock of successive steps, to the bit
-        k = 0
         if self._gpu is not None:
-            return self._advance_on_gpu(work, interval, times, n_steps)
+            return self._advance_record(self._advance_on_gpu(state, interval, times, n_steps), interval)
+        work = self._working_state(state, copy=True)
+        k = 0
         if self._has_object:
             step_times = np.array(times)
             rods = self._plain_rods if work.tangent.size == 0 else \
@@ -415,10 +427,13 @@ class Simulator:
             elif k < n_steps and interval.running.any():
                 raise RuntimeError(f"take_steps stopped at step {k} of {n_steps} with grippers running and none "
                                    f"pending")
-        N = self.disc.n_nodes
-        return record(Advance, state=self._state_of(work, times[k]),
-                      natural_curvature=interval.natural_curvature.reshape(B, F), clock=interval.clock,
-                      failed=interval.failed, newton_iterations=interval.newton_iterations,
+        return self._advance_record(self._state_of(work, times[k]), interval)
+
+    def _advance_record(self, state: RodState, interval: Interval) -> Advance:
+        """What :meth:`advance` returns: ``state`` and ``interval``'s results, shaped per gripper."""
+        B, F, N = self.batch_size, self.n_fingers, self.disc.n_nodes
+        return record(Advance, state=state, natural_curvature=interval.natural_curvature.reshape(B, F),
+                      clock=interval.clock, failed=interval.failed, newton_iterations=interval.newton_iterations,
                       normal_impulse=interval.normal_impulse.reshape(B, F, N),
                       impulse=interval.impulse.reshape(B, F, N, 3))
 
@@ -436,31 +451,57 @@ class Simulator:
         shape = RodsKernelShape(self.n_fingers, disc.n_nodes, disc.stride, disc.dim, finger_contact)
         return self._plain_rods, self._plain_terms, solver, disc.finger_directions, shape
 
-    def _advance_on_gpu(self, work: WorkingState, interval: Interval, times: list[float], n_steps: int) -> Advance:
-        """:meth:`advance`'s steps on the GPU, from and into ``work`` and ``interval``. With an object
-        (:class:`~.solvers.gpu.GpuGrasp`), a step that a gripper does not settle is halved in its thread, as
-        :meth:`advance` halves it. Rods on their own (:class:`~.solvers.gpu.GpuRods`): a failed step is not halved
-        (the gripper stops there)."""
-        B, F, N = self.batch_size, self.n_fingers, self.disc.n_nodes
+    def _advance_on_gpu(self, state: RodState, interval: Interval, times: list[float], n_steps: int) -> RodState:
+        """:meth:`advance`'s steps on the GPU from ``state``, updating ``interval``; the state after them. The state
+        stays on the device: it is uploaded only if it is not the one the device holds, and the state returned is
+        the device's new one, copied back (read-only). With an object (:class:`~.solvers.gpu.GpuGrasp`), a step that
+        a gripper does not settle is halved in its thread, as :meth:`advance` halves it; rods on their own
+        (:class:`~.solvers.gpu.GpuRods`) do not halve a failed step (the gripper stops there)."""
         dt = self.scene.time_step
+        if state is not self._on_device:
+            self._gpu.load(tuple(self._working_state(state, copy=False)))
         if isinstance(self._gpu, GpuGrasp):
             body = None if self._body is None else self._body.plain_arrays
-            stops = self._gpu.advance(tuple(work), self._plain_geometry, body, tuple(interval), np.array(times),
-                                      self._kernel_currents, dt, n_steps)
+            stops, arrays = self._gpu.advance(self._plain_geometry, body, tuple(interval), np.array(times),
+                                              self._kernel_currents, dt, n_steps)
             taken = int(stops.max())  # the step where each gripper stopped: the batch's time is the last's
         else:
-            water = np.zeros((n_steps + 1, B, 3)) if self._currents is None else self._currents.at_times(times)
+            water = np.zeros((n_steps + 1, self.batch_size, 3)) if self._currents is None else \
+                self._currents.at_times(times)
             clock_before = interval.clock.copy()
-            self._gpu.advance((work.q, work.velocity, work.acceleration, work.tangent, work.director,
-                               work.reference_twist), water, interval.natural_curvature, interval.curvature_rate,
-                              (interval.curvature_low, interval.curvature_high), interval.running, interval.failed,
-                              interval.clock, interval.newton_iterations, dt, n_steps)
+            arrays = self._gpu.advance(water, interval.natural_curvature, interval.curvature_rate,
+                                       (interval.curvature_low, interval.curvature_high), interval.running,
+                                       interval.failed, interval.clock, interval.newton_iterations, dt, n_steps)
             taken = int(np.rint((interval.clock - clock_before) / dt).max())
-        return record(Advance, state=self._state_of(work, times[taken]),
-                      natural_curvature=interval.natural_curvature.reshape(B, F), clock=interval.clock,
-                      failed=interval.failed, newton_iterations=interval.newton_iterations,
-                      normal_impulse=interval.normal_impulse.reshape(B, F, N),
-                      impulse=interval.impulse.reshape(B, F, N, 3))
+        self._on_device = self._state_of(WorkingState(*(_read_only(array) for array in arrays)), times[taken])
+        return self._on_device
+
+    def put_grippers(self, state: RodState, indices, part: RodState) -> RodState:
+        """A copy of ``state`` whose grippers ``indices`` (k,) are ``part``'s (a state of k grippers, e.g. new
+        episodes' ``take_grippers(sim.initial_state(), indices)``); an acceleration that ``part`` lacks and
+        ``state`` has is zero (Newton then starts from the predictor, as a fresh state's does). Where the GPU holds
+        ``state``, only those grippers' rows are uploaded into it, and the GPU holds the copy."""
+        indices = np.asarray(indices, dtype=np.int64).reshape(-1)
+        if indices.size and (indices.min() < 0 or indices.max() >= self.batch_size):
+            raise ValueError(f"Simulator.put_grippers: indices {indices.min()}..{indices.max()} are outside the "
+                             f"allowed range [0, {self.batch_size - 1}]")
+        if part.q.shape != (indices.size,) + state.q.shape[1:]:
+            raise ValueError(f"Simulator.put_grippers: part has q of shape {part.q.shape}; expected "
+                             f"{(indices.size,) + state.q.shape[1:]} for {indices.size} grippers")
+        if state.acceleration is not None and part.acceleration is None:
+            part = evolve(part, acceleration=np.zeros_like(part.q))
+        for name, value in vars(state).items():
+            if isinstance(value, np.ndarray) and getattr(part, name) is None:
+                raise ValueError(f"Simulator.put_grippers: part has no {name}, which the state has")
+        merged = put_grippers(state, indices, part)
+        if state is self._on_device:
+            rods = (indices[:, None] * self.n_fingers + np.arange(self.n_fingers)).reshape(-1)
+            rows = tuple(rods if field < N_ROD_STATE_FIELDS else indices for field in range(len(WorkingState._fields)))
+            self._gpu.put(rows, tuple(self._working_state(part, copy=False)))
+            self._on_device = evolve(merged, **{name: _read_only(value) for name, value in vars(merged).items()
+                                                if isinstance(value, np.ndarray)})
+            return self._on_device
+        return merged
 
     def _adaptive_step(self, work: WorkingState, time: float, dt: float, interval: Interval) -> None:
         """One step of :meth:`advance` on the adaptive path (:meth:`step`'s), committed into ``work`` and
@@ -504,7 +545,8 @@ class Simulator:
         """``state``'s arrays flattened per rod for the compiled steps (:class:`~.solvers.stepping.WorkingState`):
         copies that they may update, or views of the same arrays; fields the state lacks are zeros (an
         acceleration, which starts Newton at the predictor, and the holds) or empty."""
-        R, N, S = self.n_rods, self.disc.n_nodes, self.disc.stride
+        N, S = self.disc.n_nodes, self.disc.stride
+        R = state.q.shape[0] * state.q.shape[1]  # the batch's rods, or a part's (put_grippers)
 
         def flat(array, shape, empty_shape, dtype=float):
             if array is None:
@@ -825,6 +867,12 @@ class Simulator:
             return holds, None
         c, theta = motion.position, motion.rotation
         return holds, (holds.offsets, c, (c - motion.old.position) / dt, motion.orientation, theta / dt)
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    """``array``, no longer writeable (a state the GPU holds a copy of: an edit on the host alone raises)."""
+    array.flags.writeable = False
+    return array
 
 
 def _copy_as(value, shape: tuple[int, ...], dtype: type) -> np.ndarray:

@@ -206,3 +206,30 @@ def test_advance_refuses_bad_input():
         sim.advance(state, 0.0, np.nan, 1)
     with pytest.raises(ValueError, match="natural_curvature"):
         sim.advance(state, 5.0, 0.0, 1)
+
+
+def test_put_grippers_replaces_grippers_and_checks_its_input():
+    """A new episode's gripper put into a running batch: its rows are the part's, the others' are the batch's,
+    the part's missing acceleration is zero (Newton's start from the predictor, as a fresh state's); the batch's
+    own arrays are left alone. Bad indices or a part without a field the state has are refused, naming them."""
+    task = GraspTask(model="planar")
+    sim = Simulator([task_episode(task, np.random.default_rng(seed), {}).scene for seed in range(3)])
+    running = sim.advance(sim.initial_state(), 0.0, -0.2, 4).state
+    fresh = sim.initial_state()
+    part = replace(fresh, q=fresh.q[[1]], velocity=fresh.velocity[[1]], held=fresh.held[[1]],
+                   hold_offset=fresh.hold_offset[[1]], body_position=fresh.body_position[[1]] + 0.001,
+                   body_velocity=fresh.body_velocity[[1]], body_orientation=fresh.body_orientation[[1]],
+                   body_angular_velocity=fresh.body_angular_velocity[[1]])
+    before = running.q.copy()
+    merged = sim.put_grippers(running, [1], part)
+    assert np.array_equal(merged.q[1], fresh.q[1]) and np.array_equal(merged.q[[0, 2]], running.q[[0, 2]])
+    assert np.array_equal(merged.body_position[1], fresh.body_position[1] + 0.001)
+    assert np.all(merged.acceleration[1] == 0.0) and np.array_equal(merged.acceleration[0], running.acceleration[0])
+    assert np.any(running.acceleration[1] != 0.0) and np.array_equal(running.q, before)
+    assert merged.time == running.time
+    with pytest.raises(ValueError, match=r"indices 3\.\.3 are outside the allowed range \[0, 2\]"):
+        sim.put_grippers(running, [3], part)
+    with pytest.raises(ValueError, match="part has no held"):
+        sim.put_grippers(running, [1], replace(part, held=None))
+    with pytest.raises(ValueError, match=r"part has q of shape \(1, 3, .*expected \(2, 3"):
+        sim.put_grippers(running, [0, 1], part)

@@ -32,10 +32,15 @@ import json
 import numpy as np
 from benchmarks.gpu_speed import fingers_alone
 from soft_gripper_env.physics import Simulator
+from soft_gripper_env.physics.solvers.gpu import GpuRods
 
 out = {}
+loads = []
+load = GpuRods.load
+GpuRods.load = lambda self, state: (loads.append(state[0].shape[0]), load(self, state))[1]
 for model in ("planar", "3d"):
     for device in ("cpu", "cuda"):
+        del loads[:]
         sim = Simulator(fingers_alone(model, 2)[0], device=device)
         first = sim.advance(sim.initial_state(), -0.02, [[-0.3, -0.1, 0.2], [0.3, -0.3, -0.2]], 3, (-0.2, 0.2))
         second = sim.advance(first.state, first.natural_curvature, 0.25, 3, (-0.2, 0.2), running=[False, True],
@@ -47,6 +52,7 @@ for model in ("planar", "3d"):
             arrays += [state.tangent, state.director, state.reference_twist]
         out[model + "/" + device] = [np.asarray(a, dtype=float).ravel().tolist() for a in arrays]
         out[model + "/" + device + "/time"] = state.time
+        out[model + "/" + device + "/loads"] = list(loads)
 print("RESULT " + json.dumps(out))
 """
 
@@ -128,7 +134,8 @@ needs_numba_cuda = pytest.mark.skipif(not _numba_cuda_installed(),
 def test_simulated_kernel_steps_exactly_as_the_cpu():
     """The kernel in the CUDA simulator (the CUDA kernel's own code, as Python, calling the shared functions) gives
     the CPU path's state bit for bit, planar and 3-D: positions, velocities, accelerations, κ̄ ramped within its
-    range, clocks, Newton iterations, the 3-D frames, and a gripper left out of an interval left alone."""
+    range, clocks, Newton iterations, the 3-D frames, and a gripper left out of an interval left alone; the
+    second interval starts from the state left on the device, uploading nothing."""
     result = _result(_python(_RUN, simulator=True))
     for model in ("planar", "3d"):
         cpu, gpu = result[model + "/cpu"], result[model + "/cuda"]
@@ -138,6 +145,7 @@ def test_simulated_kernel_steps_exactly_as_the_cpu():
         assert result[model + "/cpu/time"] == result[model + "/cuda/time"]
         clock = np.array(cpu[4])
         assert clock[0] < clock[1]  # the stopped gripper's clock did not run in the second interval
+        assert result[model + "/cuda/loads"] == [6]  # the second interval started from the state on the device
         assert max(abs(x) for x in cpu[0]) > 0.0
 
 
@@ -160,6 +168,71 @@ def test_simulated_grasp_kernel_steps_exactly_as_the_cpu():
             assert result[key + "/cpu/held"] > 0, key  # the fingers grasp
             assert result[key + "/cuda/halved"] == 0  # the GPU's threads left no step to the host
     assert sum(result[key] for key in result if key.endswith("/cpu/halved")) > 0  # some steps were halved
+
+
+# three episodes of the task on each device, closing for twelve intervals, a new episode in slot 1 after nine while
+# the others hold their spheres, then opening; then the state before the last interval (no longer the device's)
+# stepped again. Printed as JSON with the grippers of every whole upload.
+_RESIDENT_RUN = """
+import json
+import numpy as np
+from soft_gripper_env.grasp_task import GraspBatch, GraspTask, task_episode
+from soft_gripper_env.physics.solvers.gpu import GpuGrasp
+
+out = {}
+loads = []
+load = GpuGrasp.load
+GpuGrasp.load = lambda self, state: (loads.append(state[0].shape[0]), load(self, state))[1]
+for model in ("planar", "3d"):
+    task = GraspTask(model=model)
+    for device in ("cpu", "cuda"):
+        del loads[:]
+        batch = GraspBatch(task, 3, device=device)
+        batch.reset(np.arange(3), [task_episode(task, np.random.default_rng(seed), {}) for seed in range(3)], "task")
+        arrays = []
+        for interval in range(14):
+            if interval == 9:
+                batch.reset([1], [task_episode(task, np.random.default_rng(10), {})], "task")
+            if interval == 13:
+                saved = (batch.state, batch.natural_curvature.copy(), batch.time.copy())
+            outcome = batch.step(np.full((3, 3), -1.0 if interval < 12 else 0.3), np.ones(3, dtype=bool))
+            state = batch.state
+            arrays += [state.q, state.velocity, state.acceleration, state.held, state.hold_offset,
+                       state.body_position, state.body_velocity, state.body_orientation, batch.normal_force,
+                       outcome.reward]
+        key = model + "/" + device
+        out[key + "/loads"] = list(loads)
+        again = batch.sim.advance(saved[0], saved[1], -0.1, task.substeps, task.curvature_range, clock=saved[2])
+        arrays += [again.state.q, again.state.velocity, again.normal_impulse]
+        out[key + "/again_loads"] = list(loads)
+        out[key] = [np.asarray(a, dtype=float).ravel().tolist() for a in arrays]
+        try:
+            batch.state.q[0, 0, 0, 0] = 1.0
+            out[key + "/writable"] = True
+        except ValueError:
+            out[key + "/writable"] = False
+print("RESULT " + json.dumps(out))
+"""
+
+
+@pytest.mark.slow
+@needs_numba_cuda
+def test_the_state_stays_on_the_simulated_device_between_intervals():
+    """The task's batch on the device in the CUDA simulator (whose device arrays are copies of the host's, as on a
+    GPU) steps as on the CPU, bit for bit, through fourteen intervals of grasping and a new episode in one slot,
+    with one whole upload of the state: the new episode's grippers go into the device's state row by row. A state
+    the device no longer holds is uploaded again and steps as on the CPU; the state handed back is read-only, so
+    that it cannot drift from the device's copy on the host alone."""
+    result = _result(_python(_RESIDENT_RUN, simulator=True))
+    for model in ("planar", "3d"):
+        cpu, gpu = result[model + "/cpu"], result[model + "/cuda"]
+        assert len(cpu) == len(gpu) == 143
+        for index, (a, b) in enumerate(zip(cpu, gpu, strict=True)):
+            assert np.array_equal(np.array(a), np.array(b)), (model, index)
+        assert np.sum(cpu[10 * 12 + 3]) > 0 and np.abs(cpu[10 * 12 + 4]).max() > 0  # nodes held, with offsets
+        assert result[model + "/cuda/loads"] == [9]  # one upload of the 3 grippers' 9 rods
+        assert result[model + "/cuda/again_loads"] == [9, 9]
+        assert result[model + "/cuda/writable"] is False and result[model + "/cpu/writable"] is True
 
 
 # kernels compiled to PTX for sm_90 without a GPU, named model/kind on the command line (kind: rods alone, or grasping
@@ -244,6 +317,8 @@ def test_gpu_speed_benchmark_runs_in_the_simulator(tmp_path):
         phases = g["gpu_phase_shares"]
         assert set(phases) == {"upload", "kernel", "download"} and phases["kernel"] > 0
         assert sum(phases.values()) <= g["physics_share"] + 1e-9
+        moved = g["state_bytes_per_env_step"]  # the state back every step; none up unless an episode began
+        assert moved["download"] > 0 and moved["upload"] >= 0
     assert planar["agreement"]["max_position_difference_m"] == 0.0  # the simulator runs the CPU's code
     assert (tmp_path / "gpu_speed.png").stat().st_size > 0
 

@@ -15,8 +15,10 @@ GPU; a few numbers of scratch from :func:`~..kernels.local.local_array`) and use
   fingers, the banded factorisation and Newton's loop) and :func:`~..kernels.rod_3d.rod_frames`;
 - grasping a fixed object or a free body (:class:`GpuGrasp`): the thread runs :func:`~.stepping.step_batch`, the
   CPU's own loop of steps (predictor, contact corrector, the free body's coupled solve, the step's end, the contact
-  reactions), on its gripper alone, with its scratch in its own arrays. A step the gripper does not settle is left
-  pending, and the host halves it on the CPU as the CPU path does, then launches again from the next step.
+  reactions), on its gripper alone, with its scratch in its own arrays; a step the gripper does not settle is halved
+  there, as the CPU halves it. The batch's state stays on the device between intervals (:class:`DeviceArrays`): it
+  is uploaded whole only when the host hands over a state the device does not hold, a new episode's grippers are
+  written into it row by row, and each interval copies the new state back for the host.
 
 A thread's local memory is interleaved across the threads of a warp by the GPU, so the same element of neighbouring
 threads' arrays is read in one transaction. The arrays' sizes are a kernel's compile-time constants (fingers, nodes,
@@ -53,7 +55,7 @@ from ..scene.forces import ForceTerms
 from ..scene.scene import STEP_HALVINGS_LIMIT
 from .corrector import CorrectorWork
 from .newton import NewtonWork, SolverArrays, SolveResult, for_one_gripper, step_gripper_rods
-from .stepping import StepWork, WorkingState, gripper_body, gripper_views, step_batch
+from .stepping import N_ROD_STATE_FIELDS, StepWork, WorkingState, gripper_body, gripper_views, step_batch
 
 THREADS_PER_BLOCK = 64
 """CUDA threads (grippers) per block: each thread holds tens of kilobytes of local arrays, so small blocks keep
@@ -206,7 +208,8 @@ class RodsKernelShape(NamedTuple):
 
 _KERNELS: dict[tuple, object] = {}
 """Each kernel built, by its shape (:class:`RodsKernelShape` or :class:`GraspKernelShape`, whose types tell them
-apart): numba-cuda compiles it on its first launch and keeps it."""
+apart; a plain tuple naming a kernel that takes no shape): numba-cuda compiles it on its first launch and keeps
+it."""
 
 
 def _compiled(shape: tuple, build):
@@ -363,8 +366,51 @@ def _build_rods_kernel(shape: RodsKernelShape):
     return advance_rods_interval
 
 
-class GpuRods:
-    """Rods on their own, stepped on the GPU: the batch's constants on the device, and :meth:`advance`.
+class _Stepper:
+    """What the GPU's steppers share: the batch's state kept on the device between advances (:class:`DeviceArrays`
+    of :class:`~.stepping.WorkingState`'s fields), and a count of each phase's wall time."""
+
+    def __init__(self, host: bool) -> None:
+        self.cuda = None if host else cuda_module()
+        self.seconds = _phases()
+        """Wall seconds spent in each phase of the advances so far (:func:`_phases`)."""
+        self.state: DeviceArrays | None = None
+        """The batch's state on the device, once :meth:`load` has put one there; each advance updates it in
+        place."""
+
+    def load(self, state: tuple) -> None:
+        """Uploads ``state`` (:class:`~.stepping.WorkingState`'s fields, host arrays) whole, as the state the next
+        advance starts from."""
+        begin = time.perf_counter()
+        if self.state is None:
+            self.state = DeviceArrays(self.cuda, state)
+        else:
+            self.state.load(state)
+        self.seconds["upload"] += time.perf_counter() - begin
+
+    def put(self, rows: tuple, values: tuple) -> None:
+        """Writes ``values`` (:class:`~.stepping.WorkingState`'s fields for some grippers) into the rows ``rows``
+        (one index array per field) of the state on the device, leaving the other grippers' rows as they are."""
+        begin = time.perf_counter()
+        self._loaded().put(rows, values)
+        self.seconds["upload"] += time.perf_counter() - begin
+
+    def _loaded(self) -> DeviceArrays:
+        if self.state is None:
+            raise RuntimeError(f"{type(self).__name__}: no state on the device; load one first")
+        return self.state
+
+    def _fetch(self) -> tuple:
+        """A host copy of the state on the device (new arrays), its time counted as a download."""
+        begin = time.perf_counter()
+        host = self._loaded().fetch()
+        self.seconds["download"] += time.perf_counter() - begin
+        return host
+
+
+class GpuRods(_Stepper):
+    """Rods on their own, stepped on the GPU: the batch's constants on the device, the state kept there, and
+    :meth:`advance`.
 
     ``rods``, ``terms`` and ``solver`` are the plain fields the CPU's entry points take
     (:func:`~.newton.advance_rods`), ``finger_directions`` (F, 3). With ``host`` the arrays stay the host's and no
@@ -372,7 +418,7 @@ class GpuRods:
 
     def __init__(self, rods: tuple, terms: tuple, solver: tuple, finger_directions: np.ndarray,
                  shape: RodsKernelShape, host: bool = False) -> None:
-        self.cuda = None if host else cuda_module()
+        super().__init__(host)
         self.shape = shape
         design = rods[:N_DESIGN_FIELDS]
         fingers = design[FINGERS_FIELD]
@@ -381,37 +427,40 @@ class GpuRods:
         self.terms = _on_device(self.cuda, tuple(terms), False)
         self.solver = _on_device(self.cuda, for_one_gripper(solver, shape.n_fingers), False)
         self.directions = _on_device(self.cuda, np.ascontiguousarray(finger_directions, dtype=float), False)
-        self.seconds = _phases()
-        """Wall seconds spent in each phase of the advances so far (:func:`_phases`)."""
 
     def arguments(self, state: tuple, gripper_water: np.ndarray, natural_curvature: np.ndarray, rate: np.ndarray,
                   curvature_range: tuple[float, float], running: np.ndarray, failed: np.ndarray, clock: np.ndarray,
-                  iterations: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, tuple, list]:
-        """The kernel's arguments for :meth:`advance`'s, and the host arrays it updates with their device copies."""
-        host = [*state, natural_curvature, running, failed, clock, iterations]
-        device = [_on_device(self.cuda, x) for x in host]
-        n_state = len(state)
+                  iterations: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, list, list]:
+        """The kernel's arguments for :meth:`advance`'s (``state`` the six arrays it steps, the device's or the
+        host's), and the host arrays it writes besides the state with their device copies."""
+        written = [natural_curvature, running, failed, clock, iterations]
+        device = [_on_device(self.cuda, x) for x in written]
         interval = (_on_device(self.cuda, np.ascontiguousarray(gripper_water, dtype=float), False),
                     self.directions,
-                    device[n_state], _on_device(self.cuda, np.ascontiguousarray(rate, dtype=float), False),
-                    (float(curvature_range[0]), float(curvature_range[1])), *device[n_state + 1:],
+                    device[0], _on_device(self.cuda, np.ascontiguousarray(rate, dtype=float), False),
+                    (float(curvature_range[0]), float(curvature_range[1])), *device[1:],
                     (float(dt), int(n_steps)))
-        arguments = (tuple(device[:n_state]), self.rods, self.terms, self.solver, interval)
-        return arguments, tuple(host), device
+        arguments = (_on_device(self.cuda, tuple(state)), self.rods, self.terms, self.solver, interval)
+        return arguments, written, device
 
-    def advance(self, state: tuple, gripper_water: np.ndarray, natural_curvature: np.ndarray, rate: np.ndarray,
+    def advance(self, gripper_water: np.ndarray, natural_curvature: np.ndarray, rate: np.ndarray,
                 curvature_range: tuple[float, float], running: np.ndarray, failed: np.ndarray, clock: np.ndarray,
-                iterations: np.ndarray, dt: float, n_steps: int) -> None:
-        """Steps the grippers ``running`` through ``n_steps`` steps of ``dt`` [s] with the current at every gripper
+                iterations: np.ndarray, dt: float, n_steps: int) -> tuple:
+        """Steps the grippers ``running`` through ``n_steps`` steps of ``dt`` [s] from the state on the device
+        (:meth:`load`, :meth:`put`, the last advance), which it updates there, with the current at every gripper
         at each step's start, ``gripper_water`` (n_steps + 1, B, 3) [m/s]; κ̄ is held through a step, then ramped
-        by ``rate`` (R,) [1/s] within ``curvature_range``. Every other array is the host's and is updated in place:
-        ``state`` (q, velocity, acceleration (R, N, S), tangent, director (R, N − 1, 3), reference twist (R, N)),
-        κ̄ (R,), ``running``, ``failed`` (B,) bool, ``clock`` (B,) [s], ``iterations`` (B,) int."""
+        by ``rate`` (R,) [1/s] within ``curvature_range``. The other arrays are the host's and are updated in
+        place: κ̄ (R,), ``running``, ``failed`` (B,) bool, ``clock`` (B,) [s], ``iterations`` (B,) int. Returns a
+        host copy of the new state (:class:`~.stepping.WorkingState`'s fields, new arrays)."""
+        state = self._loaded()
         begin = time.perf_counter()
-        arguments, host, device = self.arguments(state, gripper_water, natural_curvature, rate, curvature_range,
-                                                 running, failed, clock, iterations, dt, n_steps)
+        q, velocity, acceleration, _, _, tangent, director, twist = state.device[:N_ROD_STATE_FIELDS]
+        arguments, written, device = self.arguments((q, velocity, acceleration, tangent, director, twist),
+                                                    gripper_water, natural_curvature, rate, curvature_range,
+                                                    running, failed, clock, iterations, dt, n_steps)
         self.seconds["upload"] += time.perf_counter() - begin
-        _launch(self.cuda, rods_kernel(self.shape), running.shape[0], arguments, host, device, self.seconds)
+        _launch(self.cuda, rods_kernel(self.shape), running.shape[0], arguments, written, device, self.seconds)
+        return self._fetch()
 
 
 class GraspKernelShape(NamedTuple):
@@ -541,8 +590,9 @@ def _build_grasp_kernel(shape: GraspKernelShape):
     return grasp_interval
 
 
-class GpuGrasp:
-    """Grippers grasping an object, stepped on the GPU: the batch's constants on the device, and :meth:`advance`.
+class GpuGrasp(_Stepper):
+    """Grippers grasping an object, stepped on the GPU: the batch's constants on the device, the state kept there,
+    and :meth:`advance`.
 
     ``rods``, ``terms``, ``solvers`` (one per level of halving), ``geometry`` and ``projection`` are the plain fields
     the CPU's :func:`~.stepping.take_steps` takes, ``body`` the free bodies' (None for a fixed object). The object's
@@ -552,29 +602,27 @@ class GpuGrasp:
 
     def __init__(self, rods: tuple, terms: tuple, solvers: tuple, projection: np.ndarray, shape: GraspKernelShape,
                  host: bool = False) -> None:
-        self.cuda = None if host else cuda_module()
+        super().__init__(host)
         self.shape = shape
         F = shape.n_fingers
         self.rods = _on_device(self.cuda, rods[:N_DESIGN_FIELDS])
         self.terms = _on_device(self.cuda, terms)
         self.solvers = _on_device(self.cuda, tuple(for_one_gripper(solver, F) for solver in solvers))
         self.projection = _on_device(self.cuda, projection[:F])
-        self.seconds = _phases()
-        """Wall seconds spent in each phase of the advances so far (:func:`_phases`)."""
 
     def arguments(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, times: np.ndarray,
                   currents: tuple, stops: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, list, list]:
-        """The kernel's arguments, and the host arrays it writes with their device copies."""
+        """The kernel's arguments (``state`` as it is: the device's arrays, or the host's for :func:`grasp_ptx`),
+        and the host arrays it writes besides the state with their device copies."""
         n_grippers = stops.shape[0]
-        written = [*state, *(interval[i] for i in _INTERVAL_WRITTEN), stops]
+        written = [*(interval[i] for i in _INTERVAL_WRITTEN), stops]
         device = [_on_device(self.cuda, x) for x in written]
-        n_state = len(state)
-        written_at = {index: device[n_state + i] for i, index in enumerate(_INTERVAL_WRITTEN)}
+        written_at = {index: device[i] for i, index in enumerate(_INTERVAL_WRITTEN)}
         device_interval = [written_at[i] if i in written_at else _on_device(self.cuda, x)
                            for i, x in enumerate(interval)]
         if body is None:  # a fixed object: a placeholder the kernel does not read
             body = tuple(np.zeros(n_grippers) for _ in range(N_BODY_ARRAYS)) + (0.0, 0.0, 0.0, 0.0)
-        arguments = (tuple(device[:n_state]), self.rods, self.terms, self.solvers,
+        arguments = (tuple(state), self.rods, self.terms, self.solvers,
                      (_on_device(self.cuda, tuple(geometry)), self.projection),
                      _on_device(self.cuda, tuple(body)),
                      tuple(device_interval),
@@ -582,21 +630,23 @@ class GpuGrasp:
                       _on_device(self.cuda, tuple(currents)), device[-1], float(dt), int(n_steps)))
         return arguments, written, device
 
-    def advance(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, times: np.ndarray,
-                currents: tuple, dt: float, n_steps: int) -> np.ndarray:
+    def advance(self, geometry: tuple, body: tuple | None, interval: tuple, times: np.ndarray, currents: tuple,
+                dt: float, n_steps: int) -> tuple[np.ndarray, tuple]:
         """Takes ``n_steps`` steps of ``dt`` [s] of every running gripper from the batch times ``times``
         (n_steps + 1,) [s], as :func:`~.stepping.take_steps` takes them on the CPU, with the water of ``currents``
-        (:class:`~..kernels.current.CurrentArrays`); a step a gripper does not settle is halved in its thread.
-        ``state`` (:class:`~.stepping.WorkingState`'s fields) and ``interval`` (:class:`~.stepping.Interval`'s) are
-        the host's and are updated in place. Returns the step where each gripper stopped (B,): ``n_steps``, or the
-        step after a failed one."""
+        (:class:`~..kernels.current.CurrentArrays`), from the state on the device (:meth:`load`, :meth:`put`, the
+        last advance), which it updates there; a step a gripper does not settle is halved in its thread.
+        ``interval`` (:class:`~.stepping.Interval`'s fields) is the host's and is updated in place. Returns the step
+        where each gripper stopped (B,) (``n_steps``, or the step after a failed one) and a host copy of the new
+        state (:class:`~.stepping.WorkingState`'s fields, new arrays)."""
+        state = self._loaded()
         begin = time.perf_counter()
         stops = np.zeros(interval[4].shape[0], dtype=np.int64)
-        arguments, written, device = self.arguments(state, geometry, body, interval, times, currents, stops, dt,
-                                                    n_steps)
+        arguments, written, device = self.arguments(state.device, geometry, body, interval, times, currents, stops,
+                                                    dt, n_steps)
         self.seconds["upload"] += time.perf_counter() - begin
         _launch(self.cuda, grasp_kernel(self.shape), stops.shape[0], arguments, written, device, self.seconds)
-        return stops
+        return stops, self._fetch()
 
 
 _INTERVAL_WRITTEN = (0, 4, 5, 6, 7, 8, 9, 10)
@@ -615,6 +665,96 @@ def grasp_ptx(constants: tuple, state: tuple, geometry: tuple, body: tuple | Non
     arguments, _, _ = gpu.arguments(state, geometry, body, interval, np.zeros(2), CurrentBatch(n_grippers).arrays,
                                     np.zeros(n_grippers, dtype=np.int64), 1e-3, 1)
     return _ptx(_build_grasp_kernel(constants[-1]), arguments, compute_capability)
+
+
+class DeviceArrays:
+    """Host arrays' copies kept on the device between launches (a batch's state, which each control interval
+    updates in place there): uploaded whole (:meth:`load`), written gripper by gripper (:meth:`put`) and copied back
+    whole (:meth:`fetch`). An array the host has empty is one placeholder element there, never copied. In the CUDA
+    simulator the device's arrays are copies of the host's, as on a GPU, so that a copy left out shows in its
+    tests.
+
+    ``bytes`` counts what went each way so far (``upload``, ``download``)."""
+
+    def __init__(self, cuda, host: tuple) -> None:
+        self.cuda = cuda
+        self.kinds = tuple((array.shape, array.dtype) for array in host)
+        """Each host array's shape and dtype."""
+        self.bytes = {"upload": 0, "download": 0}
+        self.device = tuple(self._allocate(np.ascontiguousarray(array)) for array in host)
+        self.bytes["upload"] += sum(array.nbytes for array in host)
+
+    def _allocate(self, array: np.ndarray):
+        if simulated(self.cuda):
+            return array.copy()
+        return self.cuda.to_device(array if array.size else np.zeros((1,) * array.ndim, dtype=array.dtype))
+
+    def load(self, host: tuple) -> None:
+        """Copies ``host`` (arrays of the same shapes and dtypes as the first) into the device's arrays."""
+        for array, on_device, (shape, dtype) in zip(host, self.device, self.kinds, strict=True):
+            if array.shape != shape or array.dtype != dtype:
+                raise ValueError(f"DeviceArrays.load: an array of shape {array.shape} and dtype {array.dtype} where "
+                                 f"the device holds {shape}, {dtype}")
+            if not array.size:
+                continue
+            array = np.ascontiguousarray(array)
+            if simulated(self.cuda):
+                np.copyto(on_device, array)
+            else:
+                on_device.copy_to_device(array)
+            self.bytes["upload"] += array.nbytes
+
+    def put(self, rows: tuple, values: tuple) -> None:
+        """Writes ``values[i]`` (k_i rows of array i's trailing shape) into the rows ``rows[i]`` (k_i,) of array
+        ``i`` on the device: only those rows cross, then a kernel scatters them."""
+        scatter = _compiled(("scatter_rows",), _build_scatter_kernel)
+        for index, (array_rows, array, on_device, (shape, dtype)) in enumerate(
+                zip(rows, values, self.device, self.kinds, strict=True)):
+            if not len(array_rows) or not np.prod(shape):
+                continue
+            array_rows = np.ascontiguousarray(array_rows, dtype=np.int64)
+            array = np.ascontiguousarray(array, dtype=dtype)
+            if array.shape != (len(array_rows),) + shape[1:] or array_rows.min() < 0 or array_rows.max() >= shape[0]:
+                raise ValueError(f"DeviceArrays.put: array {index}: {array.shape[0]} rows of shape {array.shape[1:]} "
+                                 f"into rows {array_rows.min()}..{array_rows.max()} of {shape}")
+            width = int(np.prod(shape[1:]))
+            target = on_device.reshape(shape[0], width)
+            source = array.reshape(len(array_rows), width)
+            if not simulated(self.cuda):
+                array_rows, source = self.cuda.to_device(array_rows), self.cuda.to_device(source)
+            threads = len(array_rows) * width
+            scatter[(threads + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK, THREADS_PER_BLOCK](target, array_rows,
+                                                                                             source)
+            self.bytes["upload"] += array.nbytes + 8 * len(array_rows)
+        if not simulated(self.cuda):
+            self.cuda.synchronize()
+
+    def fetch(self) -> tuple:
+        """New host copies of the device's arrays (empty where the host's were)."""
+        host = []
+        for on_device, (shape, dtype) in zip(self.device, self.kinds, strict=True):
+            if not np.prod(shape):
+                host.append(np.empty(shape, dtype=dtype))
+            elif simulated(self.cuda):
+                host.append(on_device.copy())
+            else:
+                host.append(on_device.copy_to_host())
+            self.bytes["download"] += host[-1].nbytes
+        return tuple(host)
+
+
+def _build_scatter_kernel(_):
+    @cuda.jit
+    def scatter_rows(target, rows, values):
+        """``target[rows[i], j] = values[i, j]``, one thread per element of ``values``."""
+        element = cuda.grid(1)
+        width = values.shape[1]
+        if element < rows.shape[0] * width:
+            i = element // width
+            j = element - i * width
+            target[rows[i], j] = values[i, j]
+
+    return scatter_rows
 
 
 def _on_device(cuda, value, placeholder: bool = True):
@@ -703,4 +843,4 @@ class _Device(NamedTuple):
 
 __all__ = ["THREADS_PER_BLOCK", "INSTALL_HINT", "GpuUnavailable", "GpuUnsupported", "check_device", "import_cuda",
            "cuda_module", "simulated", "RodsKernelShape", "rods_kernel", "GpuRods", "rods_ptx", "GraspKernelShape",
-           "grasp_kernel", "GpuGrasp", "grasp_ptx"]
+           "grasp_kernel", "GpuGrasp", "DeviceArrays", "grasp_ptx"]

@@ -67,6 +67,10 @@ class WorkingState(NamedTuple):
     """[rad/s], (B, 3)."""
 
 
+N_ROD_STATE_FIELDS = 8
+""":class:`WorkingState`'s first fields, which have a row per rod (R = B·F); the others have one per gripper (B)."""
+
+
 class Interval(NamedTuple):
     """What a run of steps ramps and sums per gripper, in place."""
 
@@ -445,5 +449,5 @@ with_motion = none_or(_with_motion)
 compiles: :mod:`~..kernels.typed_none`)."""
 
 
-__all__ = ["WorkingState", "Interval", "StepWork", "step_work", "copy_gripper", "commit_step", "take_steps",
-           "step_batch", "gripper_views", "gripper_body"]
+__all__ = ["WorkingState", "N_ROD_STATE_FIELDS", "Interval", "StepWork", "step_work", "copy_gripper", "commit_step",
+           "take_steps", "step_batch", "gripper_views", "gripper_body"]
