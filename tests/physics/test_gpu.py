@@ -429,3 +429,54 @@ def test_gpu_trajectory_equals_the_cpu_one_over_one_second(model):
             path.append(sim.world_positions(state))
         positions[device] = np.stack(path)
     assert np.abs(positions["cpu"] - positions["cuda"]).max() <= 1e-9
+
+
+# arrays of a batch's state's kinds (per rod, per gripper, bool, an empty one) loaded on the device, rows written, a
+# second load, fetched after each; printed as JSON with whether each fetch equals NumPy's own row assignment
+_DEVICE_ARRAYS_RUN = """
+import json
+import numpy as np
+from soft_gripper_env.physics.solvers.gpu import DeviceArrays, cuda_module
+
+rng = np.random.default_rng(0)
+host = (rng.normal(size=(12, 5, 4)), rng.normal(size=(4, 3, 3)), rng.random((12, 5)) < 0.5, np.zeros((0, 0, 3)))
+device = DeviceArrays(cuda_module(), host)
+checks = {"loaded": all(np.array_equal(a, b) for a, b in zip(device.fetch(), host, strict=True))}
+rows = (np.array([3, 4, 5, 9, 10, 11]), np.array([1, 3]), np.array([3, 4, 5, 9, 10, 11]), np.array([], dtype=int))
+values = (rng.normal(size=(6, 5, 4)), rng.normal(size=(2, 3, 3)), rng.random((6, 5)) < 0.5, np.zeros((0, 0, 3)))
+device.put(rows, values)
+expected = tuple(a.copy() for a in host)
+for array, index, value in zip(expected, rows, values, strict=True):
+    array[index] = value
+fetched = device.fetch()
+checks["put"] = all(np.array_equal(a, b) and a.dtype == b.dtype for a, b in zip(fetched, expected, strict=True))
+checks["host_untouched"] = not np.array_equal(host[0], expected[0])
+again = tuple(a + 1 if a.dtype != bool else ~a for a in host)
+device.load(again)
+checks["reloaded"] = all(np.array_equal(a, b) for a, b in zip(device.fetch(), again, strict=True))
+checks["bytes"] = device.bytes
+print("RESULT " + json.dumps(checks))
+"""
+
+
+def _check_device_arrays(simulator: bool) -> None:
+    checks = _result(_python(_DEVICE_ARRAYS_RUN, simulator=simulator))
+    assert checks["loaded"] and checks["put"] and checks["host_untouched"] and checks["reloaded"], checks
+    state_bytes = 12 * 5 * 4 * 8 + 4 * 3 * 3 * 8 + 12 * 5
+    assert checks["bytes"]["upload"] == 2 * state_bytes + 6 * 5 * 4 * 8 + 2 * 3 * 3 * 8 + 6 * 5 + 8 * (6 + 2 + 6)
+    assert checks["bytes"]["download"] == 3 * state_bytes
+
+
+@needs_numba_cuda
+def test_device_arrays_load_write_rows_and_fetch_in_the_simulator():
+    """The state's store on the device (its arrays copies of the host's in the simulator, as on a GPU): loaded,
+    some rows written by the scatter kernel (float and bool arrays, per-rod and per-gripper rows, an empty array
+    skipped), loaded again, each fetch equal to NumPy's own assignment; the bytes each way counted."""
+    _check_device_arrays(simulator=True)
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(not _gpu_available(), reason="needs a CUDA GPU")
+def test_device_arrays_load_write_rows_and_fetch_on_a_gpu():
+    """The same on a real GPU, where the copies and the scatter kernel are the device's own."""
+    _check_device_arrays(simulator=False)
