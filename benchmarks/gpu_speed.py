@@ -144,10 +144,10 @@ def gpu_speed(model: str, size: int, n_intervals: int) -> dict:
     # the kernel alone: the same interval on arrays that stay on the device (CUDA events time it)
     work = sim._working_state(advanced.state, copy=True)
     B, R = sim.batch_size, sim.n_rods
-    water = np.zeros((task.substeps + 1, B, 3)) if sim._currents is None else \
-        sim._currents.at_times(advanced.state.time + task.physics_dt * np.arange(task.substeps + 1))
+    times = advanced.state.time + task.physics_dt * np.arange(task.substeps + 1)
     arguments, _, _ = sim._gpu.arguments(
-        (work.q, work.velocity, work.acceleration, work.tangent, work.director, work.reference_twist), water,
+        (work.q, work.velocity, work.acceleration, work.tangent, work.director, work.reference_twist), times,
+        sim._kernel_currents,
         advanced.natural_curvature.reshape(R).copy(), np.zeros(R), CURVATURE_RANGE, np.ones(B, dtype=bool),
         np.zeros(B, dtype=bool), np.zeros(B), np.zeros(B, dtype=np.int64), task.physics_dt, task.substeps)
     kernel = rods_kernel(sim._gpu.shape)

@@ -466,12 +466,11 @@ class Simulator:
                                               self._kernel_currents, dt, n_steps)
             taken = int(stops.max())  # the step where each gripper stopped: the batch's time is the last's
         else:
-            water = np.zeros((n_steps + 1, self.batch_size, 3)) if self._currents is None else \
-                self._currents.at_times(times)
             clock_before = interval.clock.copy()
-            arrays = self._gpu.advance(water, interval.natural_curvature, interval.curvature_rate,
-                                       (interval.curvature_low, interval.curvature_high), interval.running,
-                                       interval.failed, interval.clock, interval.newton_iterations, dt, n_steps)
+            arrays = self._gpu.advance(np.array(times), self._kernel_currents, interval.natural_curvature,
+                                       interval.curvature_rate, (interval.curvature_low, interval.curvature_high),
+                                       interval.running, interval.failed, interval.clock,
+                                       interval.newton_iterations, dt, n_steps)
             taken = int(np.rint((interval.clock - clock_before) / dt).max())
         self._on_device = self._state_of(WorkingState(*(_read_only(array) for array in arrays)), times[taken])
         return self._on_device

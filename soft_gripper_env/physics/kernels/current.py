@@ -38,7 +38,7 @@ class CurrentArrays(NamedTuple):
     """The batch time at which each gripper's clock reads 0 [s], (B,)."""
 
 
-@kernel
+@kernel(python=True)  # the CUDA simulator's threads of the rods' kernel call it from Python
 def current_velocity(currents, b, time, velocity):
     """The water's velocity at gripper ``b`` at the batch time ``time`` [s] into ``velocity`` (3,) [m/s]: the
     :class:`~..scene.fluid.Current` formula, u = mean + oscillation·sin(2π·t/period + phase) + gust(t), with the gust

@@ -46,7 +46,7 @@ from numba.core import types
 from ..kernels.assembly import FINGERS_FIELD, N_DESIGN_FIELDS, StepInputs, named_rods
 from ..kernels.body import N_BODY_ARRAYS
 from ..kernels.compiled import kernel
-from ..kernels.current import CurrentBatch
+from ..kernels.current import CurrentBatch, current_velocity
 from ..kernels.finger_contact import finger_scratch_size
 from ..kernels.forces import project_water
 from ..kernels.local import local_array
@@ -230,8 +230,9 @@ def rods_kernel(shape: RodsKernelShape):
     ``rods`` = the design's fields of :class:`~..kernels.assembly.RodArrays` and the finger contact's, as plain
     tuples; ``terms`` the :class:`~..scene.forces.ForceTerms`' fields; ``solver`` the
     :class:`~.newton.SolverArrays`' fields (their per-rod arrays for one gripper's F rods);
-    ``interval`` = (gripper water (K + 1, B, 3) [m/s], finger directions (F, 3), κ̄ (R,), rate (R,) [1/s], (low,
-    high), running (B,) bool, failed (B,) bool, clock (B,) [s], Newton iterations (B,) int, (dt [s], steps K))."""
+    ``interval`` = (the steps' times (K + 1,) [s], the currents' :class:`~..kernels.current.CurrentArrays` fields,
+    finger directions (F, 3), κ̄ (R,), rate (R,) [1/s], (low, high), running (B,) bool, failed (B,) bool, clock
+    (B,) [s], Newton iterations (B,) int, (dt [s], steps K))."""
     return _compiled(shape, _build_rods_kernel)
 
 
@@ -271,11 +272,12 @@ def _build_rods_kernel(shape: RodsKernelShape):
     @cuda.jit
     def advance_rods_interval(state, rods_design, terms_fields, solver_fields, interval):
         b = cuda.grid(1)
-        gripper_water, directions, curvature, rate, curvature_range, running, failed, clock, iterations_sum, \
+        times, currents, directions, curvature, rate, curvature_range, running, failed, clock, iterations_sum, \
             timing = interval
         if b >= running.shape[0] or not running[b]:
             return
         dt, n_steps = timing
+        current = cuda.local.array((1, 3), float64)  # the water at the gripper at a step's start
         first = b * F
         # the gripper's state in the thread's own arrays: old and new of each, swapped by copying at a step's end
         q_old = cuda.local.array((F, N, S), float64)
@@ -334,7 +336,8 @@ def _build_rods_kernel(shape: RodsKernelShape):
         solver = SolverArrays(*solver_fields)
         low, high = curvature_range
         for k in range(n_steps):
-            project_water(directions, gripper_water[k, b:b + 1], water)
+            current_velocity(currents, b, times[k], current[0])
+            project_water(directions, current, water)
             step = StepInputs(q_old, q_pred, kappa, water, dt, near)
             step_gripper_rods(0, velocity_old, acceleration_old, step, rods, terms, solver, False, q, velocity,
                               acceleration, every_rod, result, work)
@@ -428,36 +431,37 @@ class GpuRods(_Stepper):
         self.solver = _on_device(self.cuda, for_one_gripper(solver, shape.n_fingers), False)
         self.directions = _on_device(self.cuda, np.ascontiguousarray(finger_directions, dtype=float), False)
 
-    def arguments(self, state: tuple, gripper_water: np.ndarray, natural_curvature: np.ndarray, rate: np.ndarray,
-                  curvature_range: tuple[float, float], running: np.ndarray, failed: np.ndarray, clock: np.ndarray,
-                  iterations: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, list, list]:
+    def arguments(self, state: tuple, times: np.ndarray, currents: tuple, natural_curvature: np.ndarray,
+                  rate: np.ndarray, curvature_range: tuple[float, float], running: np.ndarray, failed: np.ndarray,
+                  clock: np.ndarray, iterations: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, list, list]:
         """The kernel's arguments for :meth:`advance`'s (``state`` the six arrays it steps, the device's or the
         host's), and the host arrays it writes besides the state with their device copies."""
         written = [natural_curvature, running, failed, clock, iterations]
         device = [_on_device(self.cuda, x) for x in written]
-        interval = (_on_device(self.cuda, np.ascontiguousarray(gripper_water, dtype=float), False),
-                    self.directions,
+        interval = (_on_device(self.cuda, np.ascontiguousarray(times, dtype=float), False),
+                    _on_device(self.cuda, tuple(currents)), self.directions,
                     device[0], _on_device(self.cuda, np.ascontiguousarray(rate, dtype=float), False),
                     (float(curvature_range[0]), float(curvature_range[1])), *device[1:],
                     (float(dt), int(n_steps)))
         arguments = (_on_device(self.cuda, tuple(state)), self.rods, self.terms, self.solver, interval)
         return arguments, written, device
 
-    def advance(self, gripper_water: np.ndarray, natural_curvature: np.ndarray, rate: np.ndarray,
+    def advance(self, times: np.ndarray, currents: tuple, natural_curvature: np.ndarray, rate: np.ndarray,
                 curvature_range: tuple[float, float], running: np.ndarray, failed: np.ndarray, clock: np.ndarray,
                 iterations: np.ndarray, dt: float, n_steps: int) -> tuple:
         """Steps the grippers ``running`` through ``n_steps`` steps of ``dt`` [s] from the state on the device
-        (:meth:`load`, :meth:`put`, the last advance), which it updates there, with the current at every gripper
-        at each step's start, ``gripper_water`` (n_steps + 1, B, 3) [m/s]; κ̄ is held through a step, then ramped
+        (:meth:`load`, :meth:`put`, the last advance), which it updates there, with the water of ``currents``
+        (:class:`~..kernels.current.CurrentArrays`) at each step's start, the batch times ``times`` (n_steps + 1,)
+        [s]; κ̄ is held through a step, then ramped
         by ``rate`` (R,) [1/s] within ``curvature_range``. The other arrays are the host's and are updated in
         place: κ̄ (R,), ``running``, ``failed`` (B,) bool, ``clock`` (B,) [s], ``iterations`` (B,) int. Returns a
         host copy of the new state (:class:`~.stepping.WorkingState`'s fields, new arrays)."""
         state = self._loaded()
         begin = time.perf_counter()
         q, velocity, acceleration, _, _, tangent, director, twist = state.device[:N_ROD_STATE_FIELDS]
-        arguments, written, device = self.arguments((q, velocity, acceleration, tangent, director, twist),
-                                                    gripper_water, natural_curvature, rate, curvature_range,
-                                                    running, failed, clock, iterations, dt, n_steps)
+        arguments, written, device = self.arguments((q, velocity, acceleration, tangent, director, twist), times,
+                                                    currents, natural_curvature, rate, curvature_range, running,
+                                                    failed, clock, iterations, dt, n_steps)
         self.seconds["upload"] += time.perf_counter() - begin
         _launch(self.cuda, rods_kernel(self.shape), running.shape[0], arguments, written, device, self.seconds)
         return self._fetch()
@@ -814,7 +818,8 @@ def rods_ptx(constants: tuple, state: tuple, n_grippers: int, compute_capability
     import_cuda()
     gpu = GpuRods(*constants, host=True)
     R = n_grippers * shape.n_fingers
-    arguments, _, _ = gpu.arguments(state, np.zeros((2, n_grippers, 3)), np.zeros(R), np.zeros(R), (-1.0, 1.0),
+    arguments, _, _ = gpu.arguments(state, np.zeros(2), CurrentBatch(n_grippers).arrays, np.zeros(R), np.zeros(R),
+                                    (-1.0, 1.0),
                                     np.ones(n_grippers, dtype=bool), np.zeros(n_grippers, dtype=bool),
                                     np.zeros(n_grippers), np.zeros(n_grippers, dtype=np.int64), 1e-3, 1)
     return _ptx(_build_rods_kernel(shape), arguments, compute_capability)
