@@ -26,8 +26,8 @@ within the task's range, κ̄ kept within [−0.2, 0.2]: the physics of random a
   [m], and the Newton iterations of each;
 - **GPU speed**: ``Simulator(..., device="cuda").advance`` over one control interval, for each of ``--sizes``
   grippers: env steps per second (grippers × intervals / seconds) and µs per gripper-step, end to end (the state
-  copied to the device and back at every call, the current evaluated on the host), and the kernel alone on
-  device-resident arrays (CUDA's own clock); the first call's time less a later one's is the kernel's compile time;
+  kept on the device and copied back at every call), and the kernel alone (CUDA's own clock); the first call's time
+  less a later one's is the kernel's compile time;
 - **the CPU anchor, in the same run**: the same intervals on the CPU path for 64 grippers in one batch on one
   thread (the ``make_vec(64)`` layout), and the ratio of each GPU figure to it.
 
