@@ -497,9 +497,10 @@ class Simulator:
             rods = (indices[:, None] * self.n_fingers + np.arange(self.n_fingers)).reshape(-1)
             rows = tuple(rods if field < N_ROD_STATE_FIELDS else indices for field in range(len(WorkingState._fields)))
             self._gpu.put(rows, tuple(self._working_state(part, copy=False)))
-            self._on_device = evolve(merged, **{name: _read_only(value) for name, value in vars(merged).items()
-                                                if isinstance(value, np.ndarray)})
-            return self._on_device
+            for value in vars(merged).values():
+                if isinstance(value, np.ndarray):
+                    _read_only(value)  # put_grippers made new arrays
+            self._on_device = merged
         return merged
 
     def _adaptive_step(self, work: WorkingState, time: float, dt: float, interval: Interval) -> None:

@@ -616,8 +616,8 @@ class GpuGrasp(_Stepper):
 
     def arguments(self, state: tuple, geometry: tuple, body: tuple | None, interval: tuple, times: np.ndarray,
                   currents: tuple, stops: np.ndarray, dt: float, n_steps: int) -> tuple[tuple, list, list]:
-        """The kernel's arguments (``state`` as it is: the device's arrays, or the host's for :func:`grasp_ptx`),
-        and the host arrays it writes besides the state with their device copies."""
+        """The kernel's arguments (``state`` the device's arrays, or the host's), and the host arrays it writes
+        besides the state with their device copies."""
         n_grippers = stops.shape[0]
         written = [*(interval[i] for i in _INTERVAL_WRITTEN), stops]
         device = [_on_device(self.cuda, x) for x in written]
@@ -626,7 +626,7 @@ class GpuGrasp(_Stepper):
                            for i, x in enumerate(interval)]
         if body is None:  # a fixed object: a placeholder the kernel does not read
             body = tuple(np.zeros(n_grippers) for _ in range(N_BODY_ARRAYS)) + (0.0, 0.0, 0.0, 0.0)
-        arguments = (tuple(state), self.rods, self.terms, self.solvers,
+        arguments = (_on_device(self.cuda, tuple(state)), self.rods, self.terms, self.solvers,
                      (_on_device(self.cuda, tuple(geometry)), self.projection),
                      _on_device(self.cuda, tuple(body)),
                      tuple(device_interval),

@@ -67,7 +67,7 @@ class WorkingState(NamedTuple):
     """[rad/s], (B, 3)."""
 
 
-N_ROD_STATE_FIELDS = 8
+N_ROD_STATE_FIELDS = WorkingState._fields.index("body_position")
 """:class:`WorkingState`'s first fields, which have a row per rod (R = B·F); the others have one per gripper (B)."""
 
 
