@@ -428,13 +428,19 @@ def test_first_step_times_the_demos_own_commands(tmp_path):
     """The demo it times is scripts/demo.sh's, command for command, so the two cannot drift apart."""
     from tools.first_step import demo_commands
 
-    commands = demo_commands(tmp_path)
-    script = (Path(__file__).resolve().parents[1] / "scripts" / "demo.sh").read_text()
-    assert len(commands) == script.count("\n.venv/bin/python ") >= 3
-    assert all(command[0] == sys.executable and command[1] == "-m" for command in commands)
-    assert [command[2] for command in commands] == ["examples.reproduce_paper", "examples.record_video",
-                                                    "examples.record_video"]
-    assert all(str(tmp_path) in " ".join(command) and "$out" not in " ".join(command) for command in commands)
+    root = Path(__file__).resolve().parents[1]
+    commands = demo_commands(root, tmp_path)
+    script = (root / "scripts" / "demo.sh").read_text()
+    assert len(commands) == script.count("\n.venv/bin/python ") >= 4
+    assert all(command[:2] == [sys.executable, "-c"] and command[3] == str(root) for command in commands)
+    assert [command[4] for command in commands] == ["soft_gripper_env.precompile", "examples.reproduce_paper",
+                                                    "examples.record_video", "examples.record_video"]
+    assert all(str(tmp_path) in " ".join(command[4:]) and "$out" not in " ".join(command) for command in commands[1:])
+    demo = tmp_path / "tree" / "scripts" / "demo.sh"
+    demo.parent.mkdir(parents=True)
+    demo.write_text(".venv/bin/python examples/record_video.py --out $out\n")
+    with pytest.raises(ValueError, match="python -m MODULE"):
+        demo_commands(tmp_path / "tree", tmp_path)
 
 
 def test_the_gpu_session_script_parses_and_refuses_an_unknown_part(tmp_path):

@@ -101,14 +101,14 @@ print("RESULT " + json.dumps(out))
 """
 
 
-def _python(script: str, simulator: bool) -> subprocess.CompletedProcess:
+def _python(script: str, simulator: bool, arguments: tuple[str, ...] = ()) -> subprocess.CompletedProcess:
     env = dict(os.environ)
     env.pop("NUMBA_ENABLE_CUDASIM", None)
     if simulator:
         env["NUMBA_ENABLE_CUDASIM"] = "1"
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    return subprocess.run([sys.executable, "-c", textwrap.dedent(script)], capture_output=True, text=True, env=env,
-                          cwd=ROOT, timeout=900)
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(script), *arguments], capture_output=True, text=True,
+                          env=env, cwd=ROOT, timeout=900)
 
 
 def _result(run: subprocess.CompletedProcess) -> dict:
@@ -255,7 +255,7 @@ for name in sys.argv[1:]:
         sim = Simulator(fingers_alone(model, 1)[0])
         work = sim._working_state(sim.initial_state(), copy=True)
         ptx = rods_ptx(sim.gpu_constants(), (work.q, work.velocity, work.acceleration, work.tangent, work.director,
-                                             work.reference_twist), 1)
+                                             work.reference_twist), 1, optimised=False)
     else:
         scene = task_episode(GraspTask(model=model), np.random.default_rng(0), {}).scene
         sim = Simulator(scene if kind == "free" else replace(scene, grasped_object=PAPER_BALL))
@@ -264,7 +264,8 @@ for name in sys.argv[1:]:
         interval = Interval(np.zeros(R), np.zeros(R), -0.2, 0.0, np.ones(1, bool), np.zeros(1, bool), np.zeros(1),
                             np.zeros(1, np.int64), np.zeros((R, N)), np.zeros((R, N, 3)), np.zeros(1, bool), True)
         body = None if sim._body is None else sim._body.plain_arrays
-        ptx = grasp_ptx(sim.gpu_constants(), tuple(work), sim._plain_geometry, body, tuple(interval))
+        ptx = grasp_ptx(sim.gpu_constants(), tuple(work), sim._plain_geometry, body, tuple(interval),
+                        optimised=False)
     out[name] = {"target": ".target sm_90" in ptx, "entry": ptx.count(".entry"),
                  "seconds": time.perf_counter() - start}
 print("RESULT " + json.dumps(out))
@@ -278,20 +279,14 @@ def test_kernels_compile_to_ptx_for_sm_90():
     shared ``@njit`` source: the check that nothing on the GPU's path allocates or needs what the GPU lacks. Three
     kernels between them reach every shared function: grasping a free body in 3-D (the env's default: the 3-D
     energies and frames, the coupled solve, the palm), and in the planar model grasping a fixed object (its holds,
-    the rubbing fingers' line search) and the rods alone (``step_gripper_rods``). Two processes side by side, about
-    a minute and a half on two cores."""
-    env = dict(os.environ)
-    env.pop("NUMBA_ENABLE_CUDASIM", None)
-    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    shares = (["3d/free"], ["planar/fixed", "planar/rods"])
-    runs = [subprocess.Popen([sys.executable, "-c", textwrap.dedent(_PTX), *names], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT) for names in shares]
-    for names, run in zip(shares, runs, strict=True):
-        stdout, stderr = run.communicate(timeout=1200)
-        result = _result(subprocess.CompletedProcess(run.args, run.returncode, stdout, stderr))
-        for name in names:
-            assert result[name]["target"], name
-            assert result[name]["entry"] == 1, name
+    the rubbing fingers' line search) and the rods alone (``step_gripper_rods``). NVVM translates without
+    optimising (whether a function compiles does not depend on it; a launch on a GPU optimises, and the ``gpu``
+    tests launch): about a minute in one process."""
+    names = ("3d/free", "planar/fixed", "planar/rods")
+    result = _result(_python(_PTX, simulator=False, arguments=names))
+    for name in names:
+        assert result[name]["target"], name
+        assert result[name]["entry"] == 1, name
 
 
 @pytest.mark.slow
@@ -348,6 +343,13 @@ def test_gpu_outcome_study_runs_in_the_simulator(tmp_path):
     assert against["label_agreement"] == 1.0 and against["p90_position_gap_m"] == 0.0 and against["passes"]
     assert 0.0 <= planar["floor"]["label_agreement"] <= 1.0
     assert (tmp_path / "gpu_outcomes.png").stat().st_size > 10_000
+
+
+def test_the_ptx_check_refuses_an_optimised_flag_that_is_not_a_bool():
+    from soft_gripper_env.physics.solvers.gpu import _ptx
+
+    with pytest.raises(TypeError, match="optimised must be a bool, got 0"):
+        _ptx(None, (), (9, 0), optimised=0)
 
 
 def test_device_is_checked():

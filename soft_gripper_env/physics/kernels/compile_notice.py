@@ -17,17 +17,20 @@ NOTICE = (f"{PACKAGE}: compiling the physics kernels for this machine, once (the
 
 
 class _FirstCompile(event.Listener):
-    """Prints :data:`NOTICE` to stderr at the first compile of a function of this package."""
+    """Prints :data:`NOTICE` to stderr at the first compile of a function of this package, and counts them."""
 
     def __init__(self) -> None:
         self.said = False
+        self.compiled = 0
+        """How many of this package's functions this process has compiled (a load from the cache is not one)."""
 
     def on_start(self, compile_event) -> None:
-        if self.said:
-            return
         data = compile_event.data if isinstance(compile_event.data, dict) else {}
         module = getattr(getattr(data.get("dispatcher"), "py_func", None), "__module__", None) or ""
-        if module.split(".")[0] == PACKAGE:
+        if module.split(".")[0] != PACKAGE:
+            return
+        self.compiled += 1
+        if not self.said:
             self.said = True
             print(NOTICE, file=sys.stderr, flush=True)
 
