@@ -54,6 +54,13 @@ def compile_kernels(grasped: str) -> tuple[float, int]:
     return time.process_time() - start, compile_notice.LISTENER.compiled - compiled_before
 
 
+def _usable_cores() -> int:
+    """The cores this process may run on (a container's share, not the host's count, where the OS says)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
 def _quiet_child() -> None:
     compile_notice.LISTENER.said = True  # the parent has said what is going on
 
@@ -80,9 +87,9 @@ def main(argv: list[str] | None = None) -> dict[str, tuple[float, int]]:
     {kind: (CPU seconds, functions compiled)}."""
     arguments = _parse(argv)
     objects = arguments.objects
-    processes = arguments.processes or max(1, min(len(objects), os.cpu_count() or 1))
+    processes = arguments.processes or max(1, min(len(objects), _usable_cores()))
     print(f"precompile: the kernels for {', '.join(objects)} objects in {processes} "
-          f"process{'es' if processes > 1 else ''} (from an empty cache about two minutes on 2 cores; "
+          f"process{'es' if processes > 1 else ''} (from an empty cache about one and a half minutes on 2 cores; "
           "from a full one, seconds)", flush=True)
     results = {}
     # each process starts empty (spawn, not fork): a fork would inherit what this one has compiled
