@@ -13,12 +13,25 @@ from soft_gripper_env.precompile import OBJECTS, compile_kernels, main
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _precompile(*arguments: str) -> str:
+def _precompile(*arguments: str, cache: Path | None = None) -> str:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    if cache is not None:
+        env["NUMBA_CACHE_DIR"] = str(cache)
     run = subprocess.run([sys.executable, "-m", "soft_gripper_env.precompile", *arguments], capture_output=True,
                          text=True, env=env, cwd=ROOT, timeout=900)
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-3000:]
     return run.stdout
+
+
+@pytest.mark.slow
+def test_from_an_empty_cache_it_compiles_and_a_new_process_then_compiles_nothing(tmp_path):
+    """The fingers alone (the cheapest kind, about 45 s of CPU) into an empty cache of their own: the first run
+    compiles the package's functions, the second, a new process stepping the same scene, finds them all cached."""
+    first = _precompile("--objects", "none", cache=tmp_path).splitlines()
+    assert re.fullmatch(r"precompile: none: ([0-9]+) functions compiled \([0-9.]+ s of CPU\)", first[1]), first
+    assert int(first[1].split()[2]) > 10
+    second = _precompile("--objects", "none", cache=tmp_path).splitlines()
+    assert re.fullmatch(r"precompile: none: nothing left to compile \([0-9.]+ s of CPU\)", second[1]), second
 
 
 @pytest.mark.slow
