@@ -1,12 +1,14 @@
 """Paired tests between policies evaluated on the same seeds: is one more successful, is it gentler?
 
-    python -m agents.compare BASELINE.json POLICY.json [POLICY.json ...] [--json FILE]
+    python -m agents.compare BASELINE.json POLICY.json [POLICY.json ...] [--json FILE] [--plot FILE]
 
 Each file is what ``agents.evaluate --json`` wrote. Every policy is compared with the baseline specimen by
 specimen (the seeds must be the same): success by McNemar's exact test (the specimens only one of the two grasped
 decide it), peak finger force by a paired t-test, and the endings side by side. With several policies (training
 seeds of one setting, say), a pooled line compares each specimen's mean over them with the baseline (paired t on
-success and on force), the test a claim about the setting rather than one run needs.
+success and on force), the test a claim about the setting rather than one run needs. Where the evaluations recorded
+each specimen's radius, a second table gives every policy's success in four equal bands of it, where the task is
+hard, and ``--plot`` draws it.
 """
 
 from __future__ import annotations
@@ -77,6 +79,96 @@ def compare(baseline: dict, policy: dict) -> dict:
             "baseline_endings": {name: baseline["episode_endings"].count(name) for name in ENDINGS}}
 
 
+RADIUS_BANDS = 4
+"""How many equal bands of the specimens' radius :func:`by_radius` splits them into."""
+
+
+def by_radius(baseline: dict, policies: list[dict]) -> dict | None:
+    """Success of the baseline and of each policy in :data:`RADIUS_BANDS` equal bands of the specimens' radius
+    (from the smallest to the largest the baseline met), or None where an evaluation did not record the radii
+    (``object_radii_m``, written by agents.evaluate since it records them). Refuses evaluations whose specimens'
+    radii differ, which paired seeds cannot give."""
+    if any("object_radii_m" not in result for result in (baseline, *policies)):
+        return None
+    radii = np.array(baseline["object_radii_m"], float)
+    for policy in policies:
+        if not np.allclose(policy["object_radii_m"], radii, rtol=0.0, atol=1e-6):
+            raise ValueError(f"{policy.get('policy', 'policy')}: its specimens' radii are not the baseline's")
+    edges = np.linspace(radii.min(), radii.max(), RADIUS_BANDS + 1)
+    band = np.clip(np.searchsorted(edges, radii, side="right") - 1, 0, RADIUS_BANDS - 1)
+    counts = np.bincount(band, minlength=RADIUS_BANDS)
+
+    def rates(result: dict) -> list[float | None]:
+        success = np.array(result["successes"], float)
+        return [float(success[band == k].mean()) if counts[k] else None for k in range(RADIUS_BANDS)]
+
+    return {"edges_m": edges.tolist(), "specimens": counts.tolist(), "baseline": rates(baseline),
+            "policies": {str(policy.get("policy")): rates(policy) for policy in policies}}
+
+
+def radius_table(baseline_name: str, bands: dict) -> str:
+    """A markdown table of :func:`by_radius`'s bands: one row per band, one column per policy."""
+    names = [baseline_name, *bands["policies"]]
+    lines = ["success by specimen radius", "| radius [cm] | specimens | " + " | ".join(names) + " |",
+             "|---|---|" + "---|" * len(names)]
+    edges = bands["edges_m"]
+    for k, count in enumerate(bands["specimens"]):
+        values = [bands["baseline"][k], *(rates[k] for rates in bands["policies"].values())]
+        cells = " | ".join("—" if value is None else f"{value:.2f}" for value in values)
+        lines.append(f"| {100 * edges[k]:.2f}–{100 * edges[k + 1]:.2f} | {count} | {cells} |")
+    return "\n".join(lines)
+
+
+def plot_by_radius(baseline_name: str, bands: dict, path: Path) -> None:
+    """:func:`by_radius`'s bands as a figure: each policy's success in each band of radius, with a 95 % Wilson
+    interval, the baseline first; the number of specimens under each band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    edges = 100 * np.array(bands["edges_m"])
+    centres, width = (edges[:-1] + edges[1:]) / 2, np.diff(edges)
+    counts = np.array(bands["specimens"])
+    series = {baseline_name: bands["baseline"], **bands["policies"]}
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    step = 0.8 * width / len(series)
+    for k, (name, rates) in enumerate(series.items()):
+        x = centres - 0.4 * width + (k + 0.5) * step
+        have = np.array([rate is not None for rate in rates])
+        rate = np.array([rate if rate is not None else np.nan for rate in rates])
+        low, high = np.array([wilson_interval(round(r * n), n) if ok else (np.nan, np.nan)
+                              for r, n, ok in zip(rate, counts, have, strict=True)]).T
+        ax.bar(x[have], rate[have], step[have], color=f"C{k}", alpha=0.85, label=name)
+        ax.errorbar(x[have], rate[have], yerr=[(rate - low)[have], (high - rate)[have]], fmt="none", ecolor="0.2",
+                    capsize=2, lw=0.8)
+    ax.set_xticks(centres)
+    ax.set_xticklabels([f"{low:.2f}–{high:.2f}\n{count} specimens"
+                        for low, high, count in zip(edges[:-1], edges[1:], counts, strict=True)])
+    ax.set_xlabel("specimen radius [cm]")
+    ax.set_ylabel("success rate (95 % interval)")
+    ax.set_ylim(0, 1.15)
+    ax.set_yticks(np.linspace(0, 1, 6))
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left", ncol=len(series))
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    print(f"wrote {path}")
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """The Wilson score interval of a success rate, ``successes`` of ``n`` (95 % by default)."""
+    if n < 1 or not 0 <= successes <= n:
+        raise ValueError(f"wilson_interval: successes = {successes} of n = {n} must satisfy 0 <= successes <= n, "
+                         f"n >= 1")
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return min(max(0.0, centre - half), p), max(min(1.0, centre + half), p)  # rounding cannot leave p outside
+
+
 def _spread(values: list[float]) -> float:
     """Sample standard deviation, 0 for a single value."""
     return float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
@@ -129,6 +221,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("baseline", type=Path, help="agents.evaluate --json of the baseline")
     parser.add_argument("policies", type=Path, nargs="+", help="agents.evaluate --json of each policy")
     parser.add_argument("--json", type=Path, help="write the comparison here")
+    parser.add_argument("--plot", type=Path, help="draw the success by specimen radius here (PNG; needs evaluations "
+                                                  "that recorded the radii)")
     args = parser.parse_args(argv)
     results = {}
     for path in (args.baseline, *args.policies):
@@ -137,13 +231,22 @@ def main(argv: list[str] | None = None) -> dict:
         results[path] = json.loads(path.read_text())
         results[path].setdefault("policy", path.stem)
     baseline = results[args.baseline]
+    policies = [results[path] for path in args.policies]
     try:
-        rows = [compare(baseline, results[path]) for path in args.policies]
-        pool = pooled(baseline, [results[path] for path in args.policies]) if len(args.policies) > 1 else None
+        rows = [compare(baseline, policy) for policy in policies]
+        pool = pooled(baseline, policies) if len(policies) > 1 else None
+        bands = by_radius(baseline, policies)
     except ValueError as error:
         parser.error(str(error))
+    if args.plot and bands is None:
+        parser.error("--plot draws the success by specimen radius, which these evaluations did not record (run "
+                     "agents.evaluate again)")
     print(table(str(baseline["policy"]), rows, pool))
-    summary = {"baseline": str(args.baseline), "comparisons": rows, "pooled": pool}
+    if bands is not None:
+        print(radius_table(str(baseline["policy"]), bands))
+        if args.plot:
+            plot_by_radius(str(baseline["policy"]), bands, args.plot)
+    summary = {"baseline": str(args.baseline), "comparisons": rows, "pooled": pool, "by_radius": bands}
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(summary, indent=2))

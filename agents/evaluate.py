@@ -67,13 +67,14 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
     (the largest sum of one finger's normal forces, averaged over a control interval), the mean peak load (that
     peak over the specimen's fragility limit, dimensionless) and the fraction of episodes whose peak passed the
     limit (harm needs the sustained force to pass it; a brief squeeze does not), how many episodes ended each way
-    (:func:`episode_ending`), the wall time [s], and per episode: success, return, peak force, peak load, ending and
-    the object's final offset from the grasp point [m]."""
+    (:func:`episode_ending`), the wall time [s], and per episode: success, return, peak force, peak load, ending,
+    the object's final offset from the grasp point [m], its radius [m] (as observed) and its fragility limit [N]."""
     num_envs = max(1, min(num_envs, episodes))
     venv = SoftGripperUnderwaterVectorEnv(num_envs, **settings)
     task = venv.task
     check_action_map(policy, task)
-    offset_part = observation_slices(task)["object_offset"]
+    layout = observation_slices(task)
+    offset_part, radius_part = layout["object_offset"], layout["object_radius"]
     term_names = [term.name for term in fields(RewardWeights)]
     records: list[dict] = []
     start = time.perf_counter()
@@ -81,6 +82,7 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
         for first in range(seed, seed + episodes, num_envs):
             count = min(num_envs, seed + episodes - first)
             observations, _ = venv.reset(seed=[first + k for k in range(num_envs)])
+            radii = observations[:, radius_part][:, 0].astype(float)
             returns, peaks, loads = np.zeros(num_envs), np.zeros(num_envs), np.zeros(num_envs)
             term_sums = np.zeros((len(term_names), num_envs))
             lengths = np.zeros(num_envs, dtype=np.int64)
@@ -101,7 +103,8 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
                                 "length": int(lengths[k]), "peak": float(peaks[k]), "load": float(loads[k]),
                                 "terms": term_sums[:, k].copy(),
                                 "ending": episode_ending(task, observations[k], bool(terminated[k]), single),
-                                "offset": [float(x) for x in observations[k][offset_part]]}
+                                "offset": [float(x) for x in observations[k][offset_part]],
+                                "radius": float(radii[k]), "limit": float(info["fragile_force_N"][k])}
                     running[k] = False
             records += [ended[k] for k in range(count)]
             bar.update(count)
@@ -118,7 +121,8 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], episodes: int, seed: in
             "fraction_peak_above_limit": float(np.mean(np.array(column["load"]) > 1.0)),
             "endings": {name: column["ending"].count(name) for name in ENDINGS}, "seconds": seconds,
             "successes": column["success"], "returns": column["return"], "peak_contact_forces_N": column["peak"],
-            "peak_loads": column["load"], "episode_endings": column["ending"], "final_object_offsets": column["offset"]}
+            "peak_loads": column["load"], "episode_endings": column["ending"], "final_object_offsets": column["offset"],
+            "object_radii_m": column["radius"], "fragile_forces_N": column["limit"]}
 
 
 def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:

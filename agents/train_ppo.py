@@ -5,6 +5,7 @@
         [--touching-closing-rate RATE] [--approach-slowing-gap M] [--final-pressure-weight 12]
         [--pressure-ramp 200000 400000] [--checkpoint-every 100000] [--residual-to reactive_tuned]
         [--residual-rate 0.1] [--residual-gust-hold] [--residual-press-limit FRACTION] [--residual-close-untouched]
+        [--oversample-radius LOW HIGH SHARE]
 
 By default PPO trains in the env's default rod model (3-D; ``--model planar`` costs about a third per step) on the
 sensors' observation (``GraspTask.observation``), whose readings mean the same in both models, so a policy trained
@@ -27,6 +28,10 @@ config.json records the controller, so ``agents.evaluate --policy DIR`` runs the
 ``--residual-press-limit F`` to close one that presses above F times the specimen's fragility limit, and
 ``--residual-close-untouched`` to open one that does not touch the specimen (:class:`agents.residual.ResidualAction`'s
 guards; config.json records them too).
+
+``--oversample-radius LOW HIGH SHARE`` draws the specimen's radius of a share SHARE of the training episodes from
+[LOW, HIGH] m instead of the task's whole range (:class:`RadiusOversampling`): most failed grasps are of the smallest
+spheres. Validation and evaluation draw as the task does.
 """
 
 from __future__ import annotations
@@ -107,6 +112,24 @@ def ramped(steps: int, start: int, end: int, initial: float, final: float) -> fl
     if steps >= end:
         return final
     return initial + (final - initial) * max(0.0, (steps - start) / (end - start))
+
+
+class RadiusOversampling:
+    """A training curriculum, the vector env's ``episode_options``: each new episode, with probability ``share``,
+    draws its specimen's radius uniformly from [``low``, ``high``] m instead of the task's range; the others draw it
+    as the task does. Its draws come from the env's own generator, so a seeded run repeats."""
+
+    def __init__(self, low: float, high: float, share: float) -> None:
+        self.low, self.high, self.share = float(low), float(high), float(share)
+
+    def __call__(self, rng: np.random.Generator) -> dict:
+        if rng.random() < self.share:
+            return {"object_radius": float(rng.uniform(self.low, self.high))}
+        return {}
+
+    def config(self) -> dict:
+        """The curriculum as config.json records it (key ``oversample_radius``)."""
+        return {"low_m": self.low, "high_m": self.high, "share": self.share}
 
 
 class PressureWarningRamp(BaseCallback):
@@ -292,6 +315,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--residual-close-untouched", action="store_true",
                         help="the correction may not open a finger that does not touch the specimen (with "
                              "--residual-to)")
+    parser.add_argument("--oversample-radius", type=float, nargs=3, default=None, metavar=("LOW", "HIGH", "SHARE"),
+                        help="draw the specimen's radius of a share SHARE in (0, 1] of the training episodes from "
+                             "[LOW, HIGH] m, within the task's range (default: every episode draws from the task's "
+                             "range; validation and evaluation always do)")
     parser.add_argument("--eval-episodes", type=int, default=200, help="held-out episodes at the end (0: none)")
     parser.add_argument("--validate-every", type=int, default=50_000,
                         help="env steps between measures of the deterministic policy on validation seeds, the "
@@ -332,9 +359,20 @@ def main(argv: list[str] | None = None) -> dict:
     if args.residual_press_limit is not None and not 0.0 < args.residual_press_limit <= 1.0:
         parser.error(f"--residual-press-limit = {args.residual_press_limit} is outside (0, 1] (a fraction of the "
                      f"fragility limit)")
+    oversampling = None
+    if args.oversample_radius is not None:
+        low, high, share = args.oversample_radius
+        smallest, largest = task.object_radius
+        if not smallest <= low < high <= largest:
+            parser.error(f"--oversample-radius: LOW = {low:g} and HIGH = {high:g} m must satisfy {smallest:g} <= LOW "
+                         f"< HIGH <= {largest:g} (the task's range)")
+        if not 0.0 < share <= 1.0:
+            parser.error(f"--oversample-radius: SHARE = {share:g} is outside (0, 1]")
+        oversampling = RadiusOversampling(low, high, share)
     args.out.mkdir(parents=True, exist_ok=True)
 
-    venv = SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads, **settings)
+    venv = SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads,
+                                episode_options=oversampling, **settings)
     residual, combine = None, None
     if args.residual_to:
         combine = ResidualAction(task, make_policy(args.residual_to, task, args.seed), args.residual_rate,
@@ -362,7 +400,7 @@ def main(argv: list[str] | None = None) -> dict:
                 "torch_threads": torch.get_num_threads(), "model": args.model, "observation": args.observation,
                 "training_wall_s": progress.training_wall(), "validation_wall_s": progress.validating_s,
                 "ppo": PPO_SETTINGS, "policy": policy_settings, "pressure_ramp": ramp.config(),
-                "residual": residual,
+                "residual": residual, "oversample_radius": None if oversampling is None else oversampling.config(),
                 "task": json.loads(json.dumps(asdict(task), default=repr))}
 
     callbacks = [progress, ramp]

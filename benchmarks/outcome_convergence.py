@@ -45,6 +45,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from agents.compare import wilson_interval
+
 from ._timing import save_plot
 
 MODELS = ("3d", "planar")
@@ -269,14 +271,6 @@ def conditions(results: dict[Piece, dict], pieces: list[Piece]) -> dict[tuple, d
             joined[condition] = {key: [x for piece in members for x in results[piece][key]]
                                  for key in ("successes", "endings", "peak_forces_N", "final_offsets_m")}
     return joined
-
-
-def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
-    """The 95 % Wilson score interval of a success rate."""
-    p = successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def two_proportion_p(successes_a: int, n_a: int, successes_b: int, n_b: int) -> float:

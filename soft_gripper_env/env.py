@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import fields, replace
 from typing import Any
 
@@ -327,6 +328,11 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
     separate cores while one shard's Python bookkeeping overlaps the other's physics. Every env's results are those
     of one thread: a shard steps its envs exactly as the whole batch would.
 
+    ``episode_options`` (default none) is a function that draws, from an env's own random generator, reset options
+    for each of its new episodes, initial and autoreset: a training curriculum, such as more of the specimens a
+    policy finds hard (``agents.train_ppo --oversample-radius``). What it returns is checked as ``reset``'s options
+    are; the options ``reset(options=...)`` names take precedence. With a seed, its draws repeat as the rest do.
+
     ``device="cuda"`` steps every env's physics on an NVIDIA GPU, one CUDA thread per env (``pip install -e
     ".[gpu]"``; :mod:`soft_gripper_env.physics.solvers.gpu`): each action's steps in one launch, the same results as
     the CPU's to rounding. The task's reward, observations and infos are computed on the host from the state copied
@@ -336,7 +342,8 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": [], "render_fps": 20}
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int = DEFAULT_MAX_EPISODE_STEPS, num_threads: int = 1,
-                 device: str = "cpu", **settings) -> None:
+                 device: str = "cpu", episode_options: Callable[[np.random.Generator], dict] | None = None,
+                 **settings) -> None:
         if not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= 100_000:
             raise ValueError(f"num_envs = {num_envs!r} is outside the allowed range [1, 100000]")
         if not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1:
@@ -344,6 +351,9 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
         if not isinstance(num_threads, (int, np.integer)) or not 1 <= num_threads <= min(num_envs, 256):
             raise ValueError(f"num_threads = {num_threads!r} is outside the allowed range [1, {min(num_envs, 256)}] "
                              f"(at most one thread per env)")
+        if episode_options is not None and not callable(episode_options):
+            raise TypeError(f"episode_options must be a function of a numpy Generator returning reset options, or "
+                            f"None; got {type(episode_options).__name__}")
         self.device = check_device(device)
         if self.device == "cuda" and num_threads != 1:
             raise ValueError(f"num_threads = {num_threads!r} with device = 'cuda': the GPU steps every env in one "
@@ -361,8 +371,8 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
         bounds = np.linspace(0, self.num_envs, self.num_threads + 1).round().astype(int)
         self._shard_ranges = list(zip(bounds[:-1], bounds[1:], strict=True))
         """Each shard's envs, as (first, end) index pairs."""
-        self._shards = [_Shard(self.task, end - first, self.max_episode_steps, self._low, self._high, self.device)
-                        for first, end in self._shard_ranges]
+        self._shards = [_Shard(self.task, end - first, self.max_episode_steps, self._low, self._high, self.device,
+                               episode_options) for first, end in self._shard_ranges]
         self._pool = None
         if self.num_threads > 1:
             from concurrent.futures import ThreadPoolExecutor
@@ -428,8 +438,9 @@ class _Shard:
     """Consecutive envs of a vector in one batched simulator: their episodes, seeds, step counts and autoresets."""
 
     def __init__(self, task: GraspTask, size: int, max_episode_steps: int, low: np.ndarray, high: np.ndarray,
-                 device: str) -> None:
+                 device: str, episode_options: Callable[[np.random.Generator], dict] | None) -> None:
         self.task, self.size, self.max_episode_steps = task, size, max_episode_steps
+        self.episode_options = episode_options
         self.low, self.high = low, high
         self.batch = GraspBatch(task, size, device)
         self.rngs: list[np.random.Generator] = []
@@ -445,8 +456,20 @@ class _Shard:
         return _observations(self.batch, self.low, self.high), infos
 
     def _reset_envs(self, indices: np.ndarray, options: dict) -> None:
-        self.batch.reset(indices, [task_episode(self.task, self.rngs[i], options) for i in indices], "task")
+        self.batch.reset(indices, [task_episode(self.task, self.rngs[i], self._options(self.rngs[i], options))
+                                   for i in indices], "task")
         self.steps[indices] = 0
+
+    def _options(self, rng: np.random.Generator, options: dict) -> dict:
+        """An episode's reset options: those the curriculum (``episode_options``) draws from the env's generator,
+        checked, under those ``reset`` was given."""
+        if self.episode_options is None:
+            return options
+        drawn = check_options(self.episode_options(rng))
+        if drawn.get("scene", "task") != "task":
+            raise ValueError(f"episode_options drew scene = {drawn['scene']!r}: a vector env's episodes are the "
+                             f"task's ('paper' is for the single env)")
+        return {**drawn, **options}
 
     def reset_done(self) -> np.ndarray:
         done = np.nonzero(self.autoreset)[0]

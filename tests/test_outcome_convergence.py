@@ -19,12 +19,6 @@ def run_of(successes, endings=None, peaks=None, offsets=None):
             "final_offsets_m": (rng.normal(0.0, 0.01, (n, 3)) if offsets is None else np.asarray(offsets)).tolist()}
 
 
-def test_wilson_interval_matches_the_closed_form_values():
-    assert study.wilson_interval(50, 100) == pytest.approx((0.4038, 0.5962), abs=1e-4)
-    low, high = study.wilson_interval(0, 10)
-    assert low == 0.0 and high == pytest.approx(0.2775, abs=1e-4)
-
-
 @pytest.mark.parametrize("a, b", [((40, 100), (55, 100)), ((380, 400), (350, 400)), ((7, 9), (7, 9))])
 def test_two_proportion_test_is_the_chi_square_test_of_the_two_by_two_table(a, b):
     table = [[a[0], a[1] - a[0]], [b[0], b[1] - b[0]]]

@@ -15,7 +15,7 @@ import soft_gripper_env
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
 from agents.scripted import ConstantPolicy, RampPolicy, RandomPolicy, ReactivePolicy
 from soft_gripper_env.env import observation_bounds, observation_slices
-from soft_gripper_env.grasp_task import GraspTask
+from soft_gripper_env.grasp_task import GraspTask, task_episode
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -134,6 +134,7 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     assert config["torch_threads"] == torch.get_num_threads()  # needed to reproduce the run bit for bit
     assert config["pressure_ramp"] == {"initial": 1.0, "final": train_ppo.FINAL_PRESSURE_WEIGHT,
                                        "start_steps": 200_000, "end_steps": 400_000}
+    assert config["oversample_radius"] is None
     assert {name: config["task"][name] for name in train_ppo.TRAINING_REFLEXES} == train_ppo.TRAINING_REFLEXES
     assert (tmp_path / "vecnormalize.pkl").exists() and (tmp_path / "ppo_model.zip").exists()
     assert any((tmp_path / "tensorboard").rglob("events.out.tfevents.*"))
@@ -160,6 +161,24 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     (tmp_path / "config.json").write_text(json.dumps(config))
     out = run_script("-m", "agents.evaluate", "--policy", str(tmp_path), "--episodes", "1", "--model", "planar")
     assert out.returncode == 2 and "acts only in the rod model it was trained in" in out.stderr
+
+
+def test_radius_oversampling_draws_its_share_of_episodes_from_its_band_and_refuses_bad_bands(capsys):
+    from agents.train_ppo import RadiusOversampling, main
+
+    curriculum = RadiusOversampling(0.045, 0.05, 0.25)
+    draws = [curriculum(np.random.default_rng(seed)) for seed in range(2000)]
+    radii = [d["object_radius"] for d in draws if d]
+    assert len(radii) / len(draws) == pytest.approx(0.25, abs=0.03)  # binomial sd 0.01
+    assert min(radii) >= 0.045 and max(radii) < 0.05 and np.mean(radii) == pytest.approx(0.0475, abs=3e-4)
+    assert all(d == {} for d in draws if not d)
+    assert curriculum.config() == {"low_m": 0.045, "high_m": 0.05, "share": 0.25}
+    for values, message in ((["0.04", "0.05", "0.3"], "LOW = 0.04 and HIGH = 0.05 m must satisfy 0.045 <= LOW"),
+                            (["0.05", "0.05", "0.3"], "must satisfy 0.045 <= LOW < HIGH <= 0.06"),
+                            (["0.045", "0.05", "0"], "SHARE = 0 is outside")):
+        with pytest.raises(SystemExit):
+            main(["--out", "unused", "--oversample-radius", *values])
+        assert message in capsys.readouterr().err
 
 
 def test_the_pressure_warning_ramp_sets_each_rollouts_weight():
@@ -271,7 +290,8 @@ def test_evaluate_runs_seeds_as_single_envs_do():
 
 def test_evaluate_reports_each_episodes_peak_force_and_its_ratio_to_the_specimens_limit():
     """The peak finger force and peak load of each episode are those a single env's infos give (the fastest constant
-    closing presses past the limit of some specimens within 0.6 s and not of others)."""
+    closing presses past the limit of some specimens within 0.6 s and not of others), and each specimen's radius
+    and limit are those its seed draws."""
     from agents.evaluate import evaluate
 
     closing = ConstantPolicy(action=-1.0)
@@ -280,6 +300,9 @@ def test_evaluate_reports_each_episodes_peak_force_and_its_ratio_to_the_specimen
     loads = []
     for k in range(3):
         obs, info = env.reset(seed=70 + k)
+        drawn = task_episode(GraspTask(), np.random.default_rng(70 + k), {})
+        assert result["object_radii_m"][k] == pytest.approx(drawn.scene.grasped_object.radius, rel=1e-6)  # float32
+        assert result["fragile_forces_N"][k] == drawn.fragile_force == info["fragile_force_N"]
         peak, load, done = 0.0, 0.0, False
         while not done:
             obs, _, terminated, truncated, info = env.step(closing(obs))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from agents.compare import compare, main, mcnemar_exact, paired_t, pooled
+from agents.compare import by_radius, compare, main, mcnemar_exact, paired_t, pooled, wilson_interval
 
 
 def evaluation(successes, forces, endings=None, first_seed=1_000_000, model="3d", policy="p") -> dict:
@@ -28,6 +28,18 @@ def test_mcnemar_without_discordant_specimens_has_nothing_to_say_and_refuses_neg
     assert mcnemar_exact(0, 0) == 1.0
     with pytest.raises(ValueError, match="wins = -1"):
         mcnemar_exact(-1, 3)
+
+
+def test_wilson_interval_matches_the_closed_form_values():
+    assert wilson_interval(50, 100) == pytest.approx((0.4038, 0.5962), abs=1e-4)
+    low, high = wilson_interval(0, 10)
+    assert low == 0.0 and high == pytest.approx(0.2775, abs=1e-4)
+    with pytest.raises(ValueError, match="successes = 11 of n = 10"):
+        wilson_interval(11, 10)
+    for n in range(1, 300):  # the interval holds its own rate, to the bit (49 of 49 once gave 0.9999999999999999)
+        for successes in {0, 1, n // 2, n - 1, n}:
+            low, high = wilson_interval(successes, n)
+            assert 0.0 <= low <= successes / n <= high <= 1.0
 
 
 def test_the_paired_t_test_is_scipys():
@@ -93,3 +105,37 @@ def test_the_command_prints_a_table_and_writes_the_comparison(tmp_path, capsys):
     written = json.loads((tmp_path / "out" / "compare.json").read_text())
     assert written["comparisons"][0]["wins"] == summary["comparisons"][0]["wins"]
     assert written["pooled"]["policies"] == 2
+
+
+def test_success_by_radius_splits_the_specimens_into_equal_bands_of_radius(tmp_path, capsys):
+    radii = [0.045, 0.046, 0.050, 0.052, 0.055, 0.060]  # bands 0.045–0.04875–0.0525–0.05625–0.06
+    baseline = evaluation([0, 1, 1, 1, 1, 1], [1.0] * 6, policy="base")
+    policy = evaluation([1, 1, 0, 1, 1, 0], [1.0] * 6, policy="ppo")
+    for result in (baseline, policy):
+        result["object_radii_m"] = radii
+    bands = by_radius(baseline, [policy])
+    assert bands["specimens"] == [2, 2, 1, 1]
+    assert bands["baseline"] == [0.5, 1.0, 1.0, 1.0]
+    assert bands["policies"]["ppo"] == [1.0, 0.5, 1.0, 0.0]
+    assert bands["edges_m"] == pytest.approx([0.045, 0.04875, 0.0525, 0.05625, 0.06])
+    (tmp_path / "a.json").write_text(json.dumps(baseline))
+    (tmp_path / "b.json").write_text(json.dumps(policy))
+    summary = main([str(tmp_path / "a.json"), str(tmp_path / "b.json"), "--plot", str(tmp_path / "radius.png")])
+    assert summary["by_radius"] == bands
+    assert "| 4.50–4.88 | 2 | 0.50 | 1.00 |" in capsys.readouterr().out
+    assert (tmp_path / "radius.png").stat().st_size > 10_000
+
+
+def test_success_by_radius_needs_every_evaluation_to_record_the_same_radii(tmp_path, capsys):
+    baseline = evaluation([1, 0, 1], [1.0] * 3)
+    policy = evaluation([1, 1, 1], [1.0] * 3)
+    assert by_radius(baseline, [policy]) is None  # evaluations written before radii were recorded
+    (tmp_path / "a.json").write_text(json.dumps(baseline))
+    (tmp_path / "b.json").write_text(json.dumps(policy))
+    with pytest.raises(SystemExit):
+        main([str(tmp_path / "a.json"), str(tmp_path / "b.json"), "--plot", str(tmp_path / "radius.png")])
+    assert "did not record" in capsys.readouterr().err and not (tmp_path / "radius.png").exists()
+    baseline["object_radii_m"] = [0.05, 0.055, 0.06]
+    policy["object_radii_m"] = [0.05, 0.055, 0.059]
+    with pytest.raises(ValueError, match="radii are not the baseline's"):
+        by_radius(baseline, [policy])

@@ -23,7 +23,7 @@ from soft_gripper_env.env import (
     observation_bounds,
     observation_slices,
 )
-from soft_gripper_env.grasp_task import MODEL_DEFAULTS, GraspTask
+from soft_gripper_env.grasp_task import MODEL_DEFAULTS, GraspTask, task_episode
 from soft_gripper_env.physics import PAPER_BALL, NewtonSettings, current_at, paper_scene, run_ramp
 from soft_gripper_env.physics import simulator as simulator_module
 
@@ -373,6 +373,41 @@ def test_vector_env_bad_input_and_step_before_reset():
         SoftGripperUnderwaterVectorEnv(num_envs=0)
     with pytest.raises(gym.error.ResetNeeded):
         SoftGripperUnderwaterEnv().step(np.zeros(3))
+
+
+def test_a_curriculum_draws_each_new_episodes_options_from_the_envs_generator():
+    """``episode_options`` is called with each env's own generator before its episode's draws, at the first reset and
+    at every autoreset; what it returns fixes the episode as ``reset``'s options would, and explicit options win."""
+
+    def small_half(rng):
+        return {"object_radius": float(rng.uniform(0.045, 0.05))} if rng.random() < 0.5 else {}
+
+    vector = SoftGripperUnderwaterVectorEnv(num_envs=6, num_threads=2, max_episode_steps=1, episode_options=small_half,
+                                            model="planar")
+    radius = observation_slices(vector.task)["object_radius"]
+    observations, _ = vector.reset(seed=40)
+    rngs = [np.random.default_rng(40 + i) for i in range(6)]
+
+    def by_hand():  # the same draws made by hand: the curriculum's first, then the episode's own
+        return [task_episode(GraspTask(), rng, small_half(rng)).scene.grasped_object.radius for rng in rngs]
+
+    first = by_hand()
+    assert observations[:, radius][:, 0] == pytest.approx(first, rel=1e-6)
+    assert 0 < sum(r < 0.05 for r in first) < 6
+    vector.step(np.zeros((6, 3)))  # every episode ends after one step; the next step resets them
+    observations, *_ = vector.step(np.zeros((6, 3)))
+    assert observations[:, radius][:, 0] == pytest.approx(by_hand(), rel=1e-6)
+    fixed, _ = vector.reset(seed=40, options={"object_radius": 0.055})
+    assert fixed[:, radius][:, 0] == pytest.approx(0.055)
+    everyone = SoftGripperUnderwaterVectorEnv(num_envs=4, episode_options=lambda rng: {"object_radius": 0.046},
+                                              model="planar")
+    assert everyone.reset(seed=1)[0][:, radius][:, 0] == pytest.approx(0.046)
+    with pytest.raises(TypeError, match="episode_options must be a function"):
+        SoftGripperUnderwaterVectorEnv(num_envs=2, episode_options={"object_radius": 0.05})
+    with pytest.raises(ValueError, match="object_radius"):
+        SoftGripperUnderwaterVectorEnv(num_envs=2, episode_options=lambda rng: {"object_radius": 0.5}).reset(seed=0)
+    with pytest.raises(ValueError, match="episode_options drew scene = 'paper'"):
+        SoftGripperUnderwaterVectorEnv(num_envs=2, episode_options=lambda rng: {"scene": "paper"}).reset(seed=0)
 
 
 def test_reset_options_fix_the_scene(env):
