@@ -102,8 +102,14 @@ def by_radius(baseline: dict, policies: list[dict]) -> dict | None:
         success = np.array(result["successes"], float)
         return [float(success[band == k].mean()) if counts[k] else None for k in range(RADIUS_BANDS)]
 
+    columns: dict[str, list[float | None]] = {}
+    for policy in policies:  # one column each, even for two evaluations of one policy
+        name = str(policy.get("policy"))
+        if name in columns:
+            name = f"{name} ({sum(key.split(' (')[0] == name for key in columns) + 1})"
+        columns[name] = rates(policy)
     return {"edges_m": edges.tolist(), "specimens": counts.tolist(), "baseline": rates(baseline),
-            "policies": {str(policy.get("policy")): rates(policy) for policy in policies}}
+            "policies": columns}
 
 
 def radius_table(baseline_name: str, bands: dict) -> str:

@@ -113,6 +113,7 @@ def test_success_by_radius_splits_the_specimens_into_equal_bands_of_radius(tmp_p
     policy = evaluation([1, 1, 0, 1, 1, 0], [1.0] * 6, policy="ppo")
     for result in (baseline, policy):
         result["object_radii_m"] = radii
+    assert list(by_radius(baseline, [policy, policy, policy])["policies"]) == ["ppo", "ppo (2)", "ppo (3)"]
     bands = by_radius(baseline, [policy])
     assert bands["specimens"] == [2, 2, 1, 1]
     assert bands["baseline"] == [0.5, 1.0, 1.0, 1.0]
