@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -103,11 +104,11 @@ def by_radius(baseline: dict, policies: list[dict]) -> dict | None:
         return [float(success[band == k].mean()) if counts[k] else None for k in range(RADIUS_BANDS)]
 
     columns: dict[str, list[float | None]] = {}
+    seen: Counter[str] = Counter()
     for policy in policies:  # one column each, even for two evaluations of one policy
         name = str(policy.get("policy"))
-        if name in columns:
-            name = f"{name} ({sum(key.split(' (')[0] == name for key in columns) + 1})"
-        columns[name] = rates(policy)
+        seen[name] += 1
+        columns[name if seen[name] == 1 else f"{name} ({seen[name]})"] = rates(policy)
     return {"edges_m": edges.tolist(), "specimens": counts.tolist(), "baseline": rates(baseline),
             "policies": columns}
 

@@ -393,9 +393,7 @@ class SoftGripperUnderwaterVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"reset got {len(seeds)} seeds for num_envs = {self.num_envs}")
-        options = check_options(options)
-        if options.get("scene") == "paper":
-            raise ValueError("reset option scene = 'paper' is for the single env (gym.make), not a vector")
+        options = _vector_options(options, "reset option")
         reseed = seed is not None
         parts = self._map("reset", self._split(seeds), [reseed] * len(self._shards), [options] * len(self._shards))
         observations, infos = _joined(parts)
@@ -465,11 +463,7 @@ class _Shard:
         checked, under those ``reset`` was given."""
         if self.episode_options is None:
             return options
-        drawn = check_options(self.episode_options(rng))
-        if drawn.get("scene", "task") != "task":
-            raise ValueError(f"episode_options drew scene = {drawn['scene']!r}: a vector env's episodes are the "
-                             f"task's ('paper' is for the single env)")
-        return {**drawn, **options}
+        return {**_vector_options(self.episode_options(rng), "episode_options drew"), **options}
 
     def reset_done(self) -> np.ndarray:
         done = np.nonzero(self.autoreset)[0]
@@ -494,6 +488,15 @@ class _Shard:
         infos = _infos(self.batch, terms, outcome.solver_failure)
         self.autoreset = terminated | truncated
         return _observations(self.batch, self.low, self.high), reward, terminated, truncated, infos
+
+
+def _vector_options(options: dict | None, source: str) -> dict:
+    """``options`` checked as ``reset``'s are (:func:`~.grasp_task.check_options`), for a vector env's episodes,
+    which are the task's: the paper's scene is the single env's. ``source`` says in the error where they came from."""
+    checked = check_options(options)
+    if checked.get("scene", "task") != "task":
+        raise ValueError(f"{source} scene = {checked['scene']!r} is for the single env (gym.make), not a vector")
+    return checked
 
 
 def _joined(parts: list[tuple]) -> tuple:
