@@ -5,7 +5,7 @@
         [--touching-closing-rate RATE] [--approach-slowing-gap M] [--final-pressure-weight 12]
         [--pressure-ramp 200000 400000] [--checkpoint-every 100000] [--residual-to reactive_tuned]
         [--residual-rate 0.1] [--residual-gust-hold] [--residual-press-limit FRACTION] [--residual-close-untouched]
-        [--oversample-radius LOW HIGH SHARE]
+        [--oversample-radius LOW HIGH SHARE] [--init-from POLICY] [--pressure-onset C]
 
 By default PPO trains in the env's default rod model (3-D; ``--model planar`` costs about a third per step) on the
 sensors' observation (``GraspTask.observation``), whose readings mean the same in both models, so a policy trained
@@ -32,6 +32,13 @@ guards; config.json records them too).
 ``--oversample-radius LOW HIGH SHARE`` draws the specimen's radius of a share SHARE of the training episodes from
 [LOW, HIGH] m instead of the task's whole range (:class:`RadiusOversampling`): most failed grasps are of the smallest
 spheres. Validation and evaluation draw as the task does.
+
+``--init-from POLICY`` starts from a trained policy (``pretrained`` or a train_ppo folder) instead of a fresh
+network: its weights, its optimiser's state and its VecNormalize statistics, which go on adapting. It fine-tunes,
+for example, the planar-trained shipped policy in the 3-D model; the policy must observe what this run observes and
+correct the same controller (or none), and its network is kept. ``--pressure-onset C`` moves the load at which the
+reward's pressure warning starts (``GraspTask.pressure_onset``, 0.7 by default) for the training episodes only:
+validation and evaluation report the task's own reward.
 """
 
 from __future__ import annotations
@@ -53,12 +60,14 @@ from tqdm import tqdm
 
 import soft_gripper_env
 from agents.evaluate import (
+    PRETRAINED,
     add_reflexes,
     evaluate,
     load_ppo,
     make_policy,
     ppo_policy,
     reflex_settings,
+    run_config,
     task_from_arguments,
 )
 from agents.learning_curves import load_run, plot_learning_curves
@@ -279,6 +288,27 @@ class RolloutCheckpoints(BaseCallback):
         return True
 
 
+def starting_policy(name: str, settings: dict, residual: dict | None) -> dict:
+    """The trained policy that ``--init-from name`` starts from: its folder, its config.json, and what the new
+    run's config.json records of it (key ``init_from``). Refuses a policy that observes otherwise than ``settings``
+    or corrects another controller than ``residual`` (or the same one with other guards), since its network would
+    read or mean something else."""
+    folder = PRETRAINED if name == "pretrained" else Path(name)
+    missing = [file for file in ("ppo_model.zip", "vecnormalize.pkl", "config.json") if not (folder / file).exists()]
+    if missing:
+        raise FileNotFoundError(f"{folder} lacks {', '.join(missing)} (agents.train_ppo --out writes them)")
+    config = run_config(folder)
+    observation = config.get("task", {}).get("observation", "full")
+    if observation != settings["observation"]:
+        raise ValueError(f"it observes {observation!r}, this run {settings['observation']!r} (--observation)")
+    if config.get("residual") != residual:
+        raise ValueError(f"it corrects {config.get('residual')}, this run {residual} (--residual-to and its guards)")
+    record = {"policy": name, "model": config.get("model"), "timesteps": config.get("timesteps"),
+              "seed": config.get("seed"), "git_commit": config.get("git_commit"),
+              "training_wall_s": config.get("training_wall_s")}
+    return {"folder": folder, "config": config, "record": record}
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The command line's options and their defaults."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -319,6 +349,12 @@ def build_parser() -> argparse.ArgumentParser:
                         help="draw the specimen's radius of a share SHARE in (0, 1] of the training episodes from "
                              "[LOW, HIGH] m, within the task's range (default: every episode draws from the task's "
                              "range; validation and evaluation always do)")
+    parser.add_argument("--init-from", default=None, metavar="POLICY",
+                        help="start from this trained policy (pretrained or a train_ppo folder): its weights, "
+                             "optimiser state and observation statistics (default: a fresh network)")
+    parser.add_argument("--pressure-onset", type=float, default=None, metavar="C",
+                        help="the load (peak force / fragility limit) at which the training reward's pressure warning"
+                             f" starts, in [0, 1) (GraspTask.pressure_onset; default {GraspTask().pressure_onset:g})")
     parser.add_argument("--eval-episodes", type=int, default=200, help="held-out episodes at the end (0: none)")
     parser.add_argument("--validate-every", type=int, default=50_000,
                         help="env steps between measures of the deterministic policy on validation seeds, the "
@@ -369,22 +405,43 @@ def main(argv: list[str] | None = None) -> dict:
         if not 0.0 < share <= 1.0:
             parser.error(f"--oversample-radius: SHARE = {share:g} is outside (0, 1]")
         oversampling = RadiusOversampling(low, high, share)
-    args.out.mkdir(parents=True, exist_ok=True)
-
-    venv = SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads,
-                                episode_options=oversampling, **settings)
+    training_settings = dict(settings)
+    if args.pressure_onset is not None:
+        if not 0.0 <= args.pressure_onset < 1.0:
+            parser.error(f"--pressure-onset = {args.pressure_onset:g} is outside [0, 1) (a fraction of the fragility "
+                         f"limit)")
+        training_settings["pressure_onset"] = args.pressure_onset
     residual, combine = None, None
     if args.residual_to:
         combine = ResidualAction(task, make_policy(args.residual_to, task, args.seed), args.residual_rate,
                                  gust_hold=args.residual_gust_hold, press_limit=args.residual_press_limit,
                                  close_untouched=args.residual_close_untouched)
-        venv = ResidualVecEnv(venv, combine)
         residual = {"base": args.residual_to, **combine.settings()}
-    env = VecNormalize(VecMonitor(venv, info_keywords=("is_success",)), gamma=PPO_SETTINGS["gamma"])
     policy_settings = RESIDUAL_POLICY_SETTINGS if residual else POLICY_SETTINGS
+    start_from = None
+    if args.init_from is not None:
+        try:
+            start_from = starting_policy(args.init_from, settings, residual)
+        except (FileNotFoundError, ValueError) as error:
+            parser.error(f"--init-from {args.init_from}: {error}")
+        policy_settings = start_from["config"]["policy"]
+    args.out.mkdir(parents=True, exist_ok=True)
+
+    venv = SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads,
+                                episode_options=oversampling, **training_settings)
+    if combine is not None:
+        venv = ResidualVecEnv(venv, combine)
+    monitored = VecMonitor(venv, info_keywords=("is_success",))
+    if start_from is None:
+        env = VecNormalize(monitored, gamma=PPO_SETTINGS["gamma"])
+    else:
+        env = VecNormalize.load(str(start_from["folder"] / "vecnormalize.pkl"), monitored)
+        env.training = True
     model = PPO("MlpPolicy", env, batch_size=min(1024, PPO_SETTINGS["n_steps"] * args.num_envs), **PPO_SETTINGS,
                 policy_kwargs=policy_settings, seed=args.seed, verbose=0, device="cpu",
                 tensorboard_log=str(args.out / "tensorboard"))
+    if start_from is not None:
+        model.set_parameters(str(start_from["folder"] / "ppo_model.zip"), exact_match=True, device="cpu")
     progress = ProgressAndCurve(args.timesteps, args.validate_every, episodes=args.validation_episodes,
                                 num_threads=args.num_threads, residual=combine, curve_file=args.out / "curve.json",
                                 **settings)
@@ -401,6 +458,8 @@ def main(argv: list[str] | None = None) -> dict:
                 "training_wall_s": progress.training_wall(), "validation_wall_s": progress.validating_s,
                 "ppo": PPO_SETTINGS, "policy": policy_settings, "pressure_ramp": ramp.config(),
                 "residual": residual, "oversample_radius": None if oversampling is None else oversampling.config(),
+                "init_from": None if start_from is None else start_from["record"],
+                "training_pressure_onset": training_settings.get("pressure_onset", task.pressure_onset),
                 "task": json.loads(json.dumps(asdict(task), default=repr))}
 
     callbacks = [progress, ramp]
