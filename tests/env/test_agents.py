@@ -181,6 +181,68 @@ def test_radius_oversampling_draws_its_share_of_episodes_from_its_band_and_refus
         assert message in capsys.readouterr().err
 
 
+def test_a_run_started_from_a_trained_policy_starts_from_its_weights_and_statistics(tmp_path, monkeypatch):
+    """--init-from: before any update the run's network, optimiser and observation statistics are the starting
+    policy's; training then goes on adapting its statistics, and --pressure-onset reaches the training reward
+    only."""
+    import pickle
+
+    import torch
+    from stable_baselines3 import PPO
+
+    from agents import train_ppo
+
+    shipped = PPO.load(train_ppo.PRETRAINED / "ppo_model.zip", device="cpu")
+    shipped_statistics = pickle.loads((train_ppo.PRETRAINED / "vecnormalize.pkl").read_bytes())
+    with monkeypatch.context() as patch:
+        patch.setattr(PPO, "learn", lambda self, *args, **kwargs: self)  # no rollout, no update
+        patch.setattr(train_ppo.ProgressAndCurve, "training_wall", lambda self: 0.0)  # its clock never started
+        train_ppo.main(["--out", str(tmp_path / "untrained"), "--init-from", "pretrained", "--timesteps", "256",
+                        "--num-envs", "2", "--num-threads", "1", "--model", "planar", "--eval-episodes", "0",
+                        "--validate-every", "0", "--checkpoint-every", "0"])
+    started = PPO.load(tmp_path / "untrained" / "ppo_model.zip", device="cpu")
+    for name, value in shipped.policy.state_dict().items():
+        assert torch.equal(value, started.policy.state_dict()[name]), name
+    moments = [model.policy.optimizer.state_dict()["state"] for model in (shipped, started)]
+    assert moments[0] and all(torch.equal(moments[0][k]["exp_avg"], moments[1][k]["exp_avg"]) for k in moments[0])
+    statistics = pickle.loads((tmp_path / "untrained" / "vecnormalize.pkl").read_bytes())
+    np.testing.assert_array_equal(statistics.obs_rms.mean, shipped_statistics.obs_rms.mean)
+    assert statistics.ret_rms.var == shipped_statistics.ret_rms.var
+
+    train_ppo.main(["--out", str(tmp_path / "tuned"), "--init-from", str(train_ppo.PRETRAINED), "--timesteps", "256",
+                    "--num-envs", "2", "--num-threads", "1", "--model", "planar", "--eval-episodes", "0",
+                    "--validate-every", "0", "--checkpoint-every", "0", "--pressure-onset", "0.5"])
+    statistics = pickle.loads((tmp_path / "tuned" / "vecnormalize.pkl").read_bytes())
+    assert statistics.obs_rms.count == pytest.approx(shipped_statistics.obs_rms.count + 256 + 2)  # + the reset
+    tuned = PPO.load(tmp_path / "tuned" / "ppo_model.zip", device="cpu").policy.state_dict()
+    assert not all(torch.equal(value, tuned[name]) for name, value in shipped.policy.state_dict().items())
+    config = json.loads((tmp_path / "tuned" / "config.json").read_text())
+    shipped_config = json.loads((train_ppo.PRETRAINED / "config.json").read_text())
+    assert config["init_from"] == {"policy": str(train_ppo.PRETRAINED), "model": "planar", "timesteps": 600_000,
+                                   "seed": shipped_config["seed"], "git_commit": shipped_config.get("git_commit"),
+                                   "training_wall_s": shipped_config["training_wall_s"]}
+    assert config["policy"] == shipped_config["policy"]
+    assert config["training_pressure_onset"] == 0.5 and config["task"]["pressure_onset"] == 0.7  # the task's own
+
+
+def test_a_run_refuses_to_start_from_a_policy_that_reads_or_means_something_else(tmp_path, capsys):
+    from agents.train_ppo import main
+
+    for extra, message in ((["--observation", "full"], "--init-from pretrained: it observes 'sensors', this run "
+                                                       "'full' (--observation)"),
+                           (["--residual-to", "reactive_tuned"], "--init-from pretrained: it corrects None, this "
+                                                                 "run {'base': 'reactive_tuned'"),
+                           (["--pressure-onset", "1"], "--pressure-onset = 1 is outside [0, 1)")):
+        with pytest.raises(SystemExit):
+            main(["--out", str(tmp_path / "refused"), "--init-from", "pretrained", *extra])
+        assert message in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--out", str(tmp_path / "refused"), "--init-from", str(tmp_path)])
+    assert f"--init-from {tmp_path}: {tmp_path} lacks ppo_model.zip, vecnormalize.pkl, config.json" in \
+        capsys.readouterr().err
+    assert not (tmp_path / "refused").exists()  # refused before anything is written
+
+
 def test_the_pressure_warning_ramp_sets_each_rollouts_weight():
     """The ramp holds the task's weight until START, grows linearly to the final weight at END and holds it; PPO's
     env gets each rollout's weight when the rollout begins."""
