@@ -424,7 +424,7 @@ def main(argv: list[str] | None = None) -> dict:
             start_from = starting_policy(args.init_from, settings, residual)
         except (FileNotFoundError, ValueError) as error:
             parser.error(f"--init-from {args.init_from}: {error}")
-        policy_settings = start_from["config"]["policy"]
+        policy_settings = start_from["config"].get("policy", policy_settings)  # its network, not ours
     args.out.mkdir(parents=True, exist_ok=True)
 
     venv = SoftGripperSB3VecEnv(args.num_envs, seed=args.seed, num_threads=args.num_threads,
