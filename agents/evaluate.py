@@ -223,6 +223,11 @@ SCRIPTED = ("random", "ramp", "reactive", "reactive_tuned")
 """The scripted policies ``--policy`` names (no config.json, no reflexes of their own)."""
 
 
+def policy_folder(name: str) -> Path:
+    """The folder of a trained policy that ``--policy`` names: ``pretrained`` (the shipped one) or a path."""
+    return PRETRAINED if name == "pretrained" else Path(name)
+
+
 def make_policy(name: str, task: GraspTask, seed: int) -> Callable[[np.ndarray], np.ndarray]:
     """``random`` (seeded by ``seed``), ``ramp``, ``reactive``, ``reactive_tuned`` (:data:`TUNED_3D_GAINS`),
     ``pretrained`` or the path of a trained policy."""
@@ -234,7 +239,7 @@ def make_policy(name: str, task: GraspTask, seed: int) -> Callable[[np.ndarray],
         return ReactivePolicy(task)
     if name == "reactive_tuned":
         return ReactivePolicy(task, **TUNED_3D_GAINS)
-    return load_ppo(PRETRAINED if name == "pretrained" else Path(name))
+    return load_ppo(policy_folder(name))
 
 
 REFLEXES = ("touching_closing_rate", "approach_slowing_gap")
@@ -310,7 +315,7 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--policy = {args.policy!r} is not {', '.join((*SCRIPTED, 'pretrained'))} or a folder")
     reflexes = reflex_settings(args)
     trained = {} if args.policy in SCRIPTED else \
-        trained_task(PRETRAINED if args.policy == "pretrained" else Path(args.policy))
+        trained_task(policy_folder(args.policy))
     from_policy = {name: trained.get(name) for name in REFLEXES if reflexes[name] is FROM_POLICY}
     reflexes.update(from_policy)
     if any(value is not None for value in from_policy.values()):

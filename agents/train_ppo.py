@@ -60,11 +60,11 @@ from tqdm import tqdm
 
 import soft_gripper_env
 from agents.evaluate import (
-    PRETRAINED,
     add_reflexes,
     evaluate,
     load_ppo,
     make_policy,
+    policy_folder,
     ppo_policy,
     reflex_settings,
     run_config,
@@ -293,7 +293,7 @@ def starting_policy(name: str, settings: dict, residual: dict | None) -> dict:
     run's config.json records of it (key ``init_from``). Refuses a policy that observes otherwise than ``settings``
     or corrects another controller than ``residual`` (or the same one with other guards), since its network would
     read or mean something else."""
-    folder = PRETRAINED if name == "pretrained" else Path(name)
+    folder = policy_folder(name)
     missing = [file for file in ("ppo_model.zip", "vecnormalize.pkl", "config.json") if not (folder / file).exists()]
     if missing:
         raise FileNotFoundError(f"{folder} lacks {', '.join(missing)} (agents.train_ppo --out writes them)")

@@ -191,9 +191,10 @@ def test_a_run_started_from_a_trained_policy_starts_from_its_weights_and_statist
     from stable_baselines3 import PPO
 
     from agents import train_ppo
+    from agents.evaluate import PRETRAINED
 
-    shipped = PPO.load(train_ppo.PRETRAINED / "ppo_model.zip", device="cpu")
-    shipped_statistics = pickle.loads((train_ppo.PRETRAINED / "vecnormalize.pkl").read_bytes())
+    shipped = PPO.load(PRETRAINED / "ppo_model.zip", device="cpu")
+    shipped_statistics = pickle.loads((PRETRAINED / "vecnormalize.pkl").read_bytes())
     with monkeypatch.context() as patch:
         patch.setattr(PPO, "learn", lambda self, *args, **kwargs: self)  # no rollout, no update
         patch.setattr(train_ppo.ProgressAndCurve, "training_wall", lambda self: 0.0)  # its clock never started
@@ -209,7 +210,7 @@ def test_a_run_started_from_a_trained_policy_starts_from_its_weights_and_statist
     np.testing.assert_array_equal(statistics.obs_rms.mean, shipped_statistics.obs_rms.mean)
     assert statistics.ret_rms.var == shipped_statistics.ret_rms.var
 
-    train_ppo.main(["--out", str(tmp_path / "tuned"), "--init-from", str(train_ppo.PRETRAINED), "--timesteps", "256",
+    train_ppo.main(["--out", str(tmp_path / "tuned"), "--init-from", str(PRETRAINED), "--timesteps", "256",
                     "--num-envs", "2", "--num-threads", "1", "--model", "planar", "--eval-episodes", "0",
                     "--validate-every", "0", "--checkpoint-every", "0", "--pressure-onset", "0.5"])
     statistics = pickle.loads((tmp_path / "tuned" / "vecnormalize.pkl").read_bytes())
@@ -217,8 +218,8 @@ def test_a_run_started_from_a_trained_policy_starts_from_its_weights_and_statist
     tuned = PPO.load(tmp_path / "tuned" / "ppo_model.zip", device="cpu").policy.state_dict()
     assert not all(torch.equal(value, tuned[name]) for name, value in shipped.policy.state_dict().items())
     config = json.loads((tmp_path / "tuned" / "config.json").read_text())
-    shipped_config = json.loads((train_ppo.PRETRAINED / "config.json").read_text())
-    assert config["init_from"] == {"policy": str(train_ppo.PRETRAINED), "model": "planar", "timesteps": 600_000,
+    shipped_config = json.loads((PRETRAINED / "config.json").read_text())
+    assert config["init_from"] == {"policy": str(PRETRAINED), "model": "planar", "timesteps": 600_000,
                                    "seed": shipped_config["seed"], "git_commit": shipped_config.get("git_commit"),
                                    "training_wall_s": shipped_config["training_wall_s"]}
     assert config["policy"] == shipped_config["policy"]
