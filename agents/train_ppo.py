@@ -48,7 +48,7 @@ import json
 import subprocess
 import time
 from collections.abc import Callable
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -123,13 +123,27 @@ def ramped(steps: int, start: int, end: int, initial: float, final: float) -> fl
     return initial + (final - initial) * max(0.0, (steps - start) / (end - start))
 
 
+@dataclass(frozen=True)
 class RadiusOversampling:
     """A training curriculum, the vector env's ``episode_options``: each new episode, with probability ``share``,
     draws its specimen's radius uniformly from [``low``, ``high``] m instead of the task's range; the others draw it
-    as the task does. Its draws come from the env's own generator, so a seeded run repeats."""
+    as the task does. Its draws come from the env's own generator, so a seeded run repeats.
 
-    def __init__(self, low: float, high: float, share: float) -> None:
-        self.low, self.high, self.share = float(low), float(high), float(share)
+    ``task_range`` is the task's ``object_radius`` range [m], which the band must lie within (a radius the task
+    never draws would train on specimens no evaluation meets); ``share`` is in (0, 1]."""
+
+    low: float
+    high: float
+    share: float
+    task_range: tuple[float, float]
+
+    def __post_init__(self) -> None:
+        smallest, largest = self.task_range
+        if not smallest <= self.low < self.high <= largest:
+            raise ValueError(f"low = {self.low:g} and high = {self.high:g} m must satisfy {smallest:g} <= low < high "
+                             f"<= {largest:g} (the task's object_radius range)")
+        if not 0.0 < self.share <= 1.0:
+            raise ValueError(f"share = {self.share:g} is outside (0, 1]")
 
     def __call__(self, rng: np.random.Generator) -> dict:
         if rng.random() < self.share:
@@ -138,7 +152,7 @@ class RadiusOversampling:
 
     def config(self) -> dict:
         """The curriculum as config.json records it (key ``oversample_radius``)."""
-        return {"low_m": self.low, "high_m": self.high, "share": self.share}
+        return {"low_m": float(self.low), "high_m": float(self.high), "share": float(self.share)}
 
 
 class PressureWarningRamp(BaseCallback):
@@ -398,13 +412,10 @@ def main(argv: list[str] | None = None) -> dict:
     oversampling = None
     if args.oversample_radius is not None:
         low, high, share = args.oversample_radius
-        smallest, largest = task.object_radius
-        if not smallest <= low < high <= largest:
-            parser.error(f"--oversample-radius: LOW = {low:g} and HIGH = {high:g} m must satisfy {smallest:g} <= LOW "
-                         f"< HIGH <= {largest:g} (the task's range)")
-        if not 0.0 < share <= 1.0:
-            parser.error(f"--oversample-radius: SHARE = {share:g} is outside (0, 1]")
-        oversampling = RadiusOversampling(low, high, share)
+        try:
+            oversampling = RadiusOversampling(low, high, share, task.object_radius)
+        except ValueError as error:
+            parser.error(f"--oversample-radius LOW HIGH SHARE: {error}")
     training_settings = dict(settings)
     if args.pressure_onset is not None:
         if not 0.0 <= args.pressure_onset < 1.0:

@@ -166,19 +166,23 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
 def test_radius_oversampling_draws_its_share_of_episodes_from_its_band_and_refuses_bad_bands(capsys):
     from agents.train_ppo import RadiusOversampling, main
 
-    curriculum = RadiusOversampling(0.045, 0.05, 0.25)
+    curriculum = RadiusOversampling(0.045, 0.05, 0.25, task_range=(0.045, 0.06))
     draws = [curriculum(np.random.default_rng(seed)) for seed in range(2000)]
     radii = [d["object_radius"] for d in draws if d]
     assert len(radii) / len(draws) == pytest.approx(0.25, abs=0.03)  # binomial sd 0.01
     assert min(radii) >= 0.045 and max(radii) < 0.05 and np.mean(radii) == pytest.approx(0.0475, abs=3e-4)
     assert all(d == {} for d in draws if not d)
     assert curriculum.config() == {"low_m": 0.045, "high_m": 0.05, "share": 0.25}
-    for values, message in ((["0.04", "0.05", "0.3"], "LOW = 0.04 and HIGH = 0.05 m must satisfy 0.045 <= LOW"),
-                            (["0.05", "0.05", "0.3"], "must satisfy 0.045 <= LOW < HIGH <= 0.06"),
-                            (["0.045", "0.05", "0"], "SHARE = 0 is outside")):
+    for values, message in ((["0.04", "0.05", "0.3"], "low = 0.04 and high = 0.05 m must satisfy 0.045 <= low"),
+                            (["0.05", "0.05", "0.3"], "must satisfy 0.045 <= low < high <= 0.06"),
+                            (["0.045", "0.05", "0"], "share = 0 is outside (0, 1]")):
         with pytest.raises(SystemExit):
             main(["--out", "unused", "--oversample-radius", *values])
-        assert message in capsys.readouterr().err
+        error = capsys.readouterr().err
+        assert "--oversample-radius LOW HIGH SHARE: " in error and message in error
+        # the class itself refuses the same band, for a caller building the curriculum in Python
+        with pytest.raises(ValueError, match=re.escape(message)):
+            RadiusOversampling(*map(float, values), task_range=(0.045, 0.06))
 
 
 def test_a_run_started_from_a_trained_policy_starts_from_its_weights_and_statistics(tmp_path, monkeypatch):
