@@ -99,18 +99,22 @@ def by_radius(baseline: dict, policies: list[dict]) -> dict | None:
     band = np.clip(np.searchsorted(edges, radii, side="right") - 1, 0, RADIUS_BANDS - 1)
     counts = np.bincount(band, minlength=RADIUS_BANDS)
 
-    def rates(result: dict) -> list[float | None]:
-        success = np.array(result["successes"], float)
-        return [float(success[band == k].mean()) if counts[k] else None for k in range(RADIUS_BANDS)]
+    def successes(result: dict) -> list[int]:
+        return np.bincount(band, weights=np.array(result["successes"], float), minlength=RADIUS_BANDS).astype(
+            int).tolist()
 
-    columns: dict[str, list[float | None]] = {}
+    def rates(band_successes: list[int]) -> list[float | None]:
+        return [won / count if count else None for won, count in zip(band_successes, counts.tolist(), strict=True)]
+
+    columns: dict[str, list[int]] = {}
     seen: Counter[str] = Counter()
     for policy in policies:  # one column each, even for two evaluations of one policy
         name = str(policy.get("policy"))
         seen[name] += 1
-        columns[name if seen[name] == 1 else f"{name} ({seen[name]})"] = rates(policy)
-    return {"edges_m": edges.tolist(), "specimens": counts.tolist(), "baseline": rates(baseline),
-            "policies": columns}
+        columns[name if seen[name] == 1 else f"{name} ({seen[name]})"] = successes(policy)
+    return {"edges_m": edges.tolist(), "specimens": counts.tolist(), "baseline": rates(successes(baseline)),
+            "policies": {name: rates(won) for name, won in columns.items()},
+            "baseline_successes": successes(baseline), "policy_successes": columns}
 
 
 def radius_table(baseline_name: str, bands: dict) -> str:
@@ -137,15 +141,15 @@ def plot_by_radius(baseline_name: str, bands: dict, path: Path) -> None:
     edges = 100 * np.array(bands["edges_m"])
     centres, width = (edges[:-1] + edges[1:]) / 2, np.diff(edges)
     counts = np.array(bands["specimens"])
-    series = {baseline_name: bands["baseline"], **bands["policies"]}
+    series = {baseline_name: bands["baseline_successes"], **bands["policy_successes"]}
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
     step = 0.8 * width / len(series)
-    for k, (name, rates) in enumerate(series.items()):
+    for k, (name, won) in enumerate(series.items()):
         x = centres - 0.4 * width + (k + 0.5) * step
-        have = np.array([rate is not None for rate in rates])
-        rate = np.array([rate if rate is not None else np.nan for rate in rates])
-        low, high = np.array([wilson_interval(round(r * n), n) if ok else (np.nan, np.nan)
-                              for r, n, ok in zip(rate, counts, have, strict=True)]).T
+        have = counts > 0
+        rate = np.where(have, np.array(won, float) / np.maximum(counts, 1), np.nan)
+        low, high = np.array([wilson_interval(w, n) if n else (np.nan, np.nan)
+                              for w, n in zip(won, counts, strict=True)]).T
         ax.bar(x[have], rate[have], step[have], color=f"C{k}", alpha=0.85, label=name)
         ax.errorbar(x[have], rate[have], yerr=[(rate - low)[have], (high - rate)[have]], fmt="none", ecolor="0.2",
                     capsize=2, lw=0.8)

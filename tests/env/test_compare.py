@@ -118,6 +118,7 @@ def test_success_by_radius_splits_the_specimens_into_equal_bands_of_radius(tmp_p
     assert bands["specimens"] == [2, 2, 1, 1]
     assert bands["baseline"] == [0.5, 1.0, 1.0, 1.0]
     assert bands["policies"]["ppo"] == [1.0, 0.5, 1.0, 0.0]
+    assert bands["baseline_successes"] == [1, 2, 1, 1] and bands["policy_successes"] == {"ppo": [2, 1, 1, 0]}
     assert bands["edges_m"] == pytest.approx([0.045, 0.04875, 0.0525, 0.05625, 0.06])
     (tmp_path / "a.json").write_text(json.dumps(baseline))
     (tmp_path / "b.json").write_text(json.dumps(policy))
