@@ -70,3 +70,53 @@ def test_every_compiled_function_of_the_physics_is_made_by_the_one_decorator():
         assert type(dispatcher._cache).__name__ != "NullCache", f"{name} is not cached"
         internal = options.get("no_cpython_wrapper", False)
         assert (type(dispatcher).__name__ == "KernelOnlyDispatcher") == internal, name
+
+
+def _arrays_reachable_from(root) -> list[np.ndarray]:
+    """Every NumPy array reachable from ``root`` through attributes, tuples, lists and dicts (the garbage collector
+    does not track arrays, so it cannot list them)."""
+    found, seen, pending = [], set(), [root]
+    while pending:
+        item = pending.pop()
+        if id(item) in seen or isinstance(item, (str, bytes, int, float, bool, type(None), type)):
+            continue
+        seen.add(id(item))
+        if isinstance(item, np.ndarray):
+            found.append(item)
+        elif isinstance(item, (tuple, list, set, frozenset)):
+            pending.extend(item)
+        elif isinstance(item, dict):
+            pending.extend(item.values())
+        elif hasattr(item, "__dict__") and not callable(item) and type(item).__module__.startswith("soft_gripper"):
+            pending.extend(vars(item).values())
+        elif hasattr(item, "__slots__") and type(item).__module__.startswith("soft_gripper"):
+            pending.extend(getattr(item, name) for name in item.__slots__ if hasattr(item, name))
+    return found
+
+
+@pytest.mark.parametrize("model", ["3d", "planar"])
+def test_env_steps_leave_no_array_referenced_more_than_before(model):
+    """Every array Python hands the kernels comes back with its reference count as it was: a kernel that kept a
+    reference (a bundle returned across the boundary between code compiled with Numba's reference counting and
+    code without it, docs/notes/compile_time.md) would leave each array one reference higher per call, and
+    never free it."""
+    import sys
+
+    import gymnasium as gym
+
+    env = gym.make("SoftGripperUnderwater-v0", model=model)
+    env.reset(seed=0)
+    closing = np.full(env.action_space.shape, -0.6, dtype=np.float32)
+
+    for _ in range(8):  # the fingers reach the sphere: the corrector and the free body's coupling run
+        env.step(closing)
+    arrays = _arrays_reachable_from(env.unwrapped)  # held here, so the same holders both times
+    before = [sys.getrefcount(a) for a in arrays]
+    steps = 12
+    for _ in range(steps):
+        env.step(closing)
+    after = [sys.getrefcount(a) for a in arrays]  # counted as before was, with the same temporaries
+    grown = [(was, now, a.shape) for a, was, now in zip(arrays, before, after, strict=True) if now > was]
+    assert len(arrays) > 50  # the state's, the task's and the simulator's own arrays were seen
+    assert not grown, f"{len(grown)} arrays gained references over {steps} env steps: {grown[:5]}"
+    env.close()
