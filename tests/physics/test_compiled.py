@@ -96,13 +96,14 @@ def _arrays_reachable_from(root) -> list[np.ndarray]:
 
 @pytest.mark.parametrize("model", ["3d", "planar"])
 def test_env_steps_leave_no_array_referenced_more_than_before(model):
-    """Every array Python hands the kernels comes back with its reference count as it was: a kernel that kept a
-    reference (a bundle returned across the boundary between code compiled with Numba's reference counting and
-    code without it, docs/notes/compile_time.md) would leave each array one reference higher per call, and
-    never free it."""
+    """Every array Python hands the kernels comes back with its reference count as it was, and every array the
+    kernels make is freed: a kernel that kept a reference (a bundle returned across the boundary between code
+    compiled with Numba's reference counting and code without it, docs/notes/compile_time.md) would leave an
+    array one reference higher per call, and never free it."""
     import sys
 
     import gymnasium as gym
+    from numba.core.runtime import _nrt_python, rtsys
 
     env = gym.make("SoftGripperUnderwater-v0", model=model)
     env.reset(seed=0)
@@ -112,9 +113,17 @@ def test_env_steps_leave_no_array_referenced_more_than_before(model):
         env.step(closing)
     arrays = _arrays_reachable_from(env.unwrapped)  # held here, so the same holders both times
     before = [sys.getrefcount(a) for a in arrays]
-    steps = 12
-    for _ in range(steps):
-        env.step(closing)
+    _nrt_python.memsys_enable_stats()  # Numba's own allocations, which Python's counts cannot see
+    try:
+        allocated = rtsys.get_allocation_stats()
+        steps = 12
+        for _ in range(steps):
+            env.step(closing)
+        allocated_after = rtsys.get_allocation_stats()
+    finally:
+        _nrt_python.memsys_disable_stats()
+    made, freed = allocated_after.mi_alloc - allocated.mi_alloc, allocated_after.mi_free - allocated.mi_free
+    assert made > 0 and freed == made, f"{made} of Numba's arrays made over {steps} env steps, {freed} freed"
     after = [sys.getrefcount(a) for a in arrays]  # counted as before was, with the same temporaries
     grown = [(was, now, a.shape) for a, was, now in zip(arrays, before, after, strict=True) if now > was]
     assert len(arrays) > 50  # the state's, the task's and the simulator's own arrays were seen
