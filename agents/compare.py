@@ -112,9 +112,10 @@ def by_radius(baseline: dict, policies: list[dict]) -> dict | None:
         name = str(policy.get("policy"))
         seen[name] += 1
         columns[name if seen[name] == 1 else f"{name} ({seen[name]})"] = successes(policy)
-    return {"edges_m": edges.tolist(), "specimens": counts.tolist(), "baseline": rates(successes(baseline)),
+    baseline_won = successes(baseline)
+    return {"edges_m": edges.tolist(), "specimens": counts.tolist(), "baseline": rates(baseline_won),
             "policies": {name: rates(won) for name, won in columns.items()},
-            "baseline_successes": successes(baseline), "policy_successes": columns}
+            "baseline_successes": baseline_won, "policy_successes": columns}
 
 
 def radius_table(baseline_name: str, bands: dict) -> str:
@@ -144,9 +145,9 @@ def plot_by_radius(baseline_name: str, bands: dict, path: Path) -> None:
     series = {baseline_name: bands["baseline_successes"], **bands["policy_successes"]}
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
     step = 0.8 * width / len(series)
+    have = counts > 0
     for k, (name, won) in enumerate(series.items()):
         x = centres - 0.4 * width + (k + 0.5) * step
-        have = counts > 0
         rate = np.where(have, np.array(won, float) / np.maximum(counts, 1), np.nan)
         low, high = np.array([wilson_interval(w, n) if n else (np.nan, np.nan)
                               for w, n in zip(won, counts, strict=True)]).T
