@@ -2,6 +2,7 @@
 
 import importlib
 import pkgutil
+import textwrap
 
 import numpy as np
 import pytest
@@ -46,7 +47,108 @@ def test_calling_a_kernel_only_kernel_from_python_raises_a_clear_error_instead_o
         _sum_of_squares(np.array([1.0]))
 
 
-@pytest.mark.parametrize("argument", ["python", "inline"])
+@kernel(runtime=True)  # it allocates
+def _fresh_zeros(n):
+    return np.zeros(n)
+
+
+@kernel
+def _pair(first, second):
+    return first, second
+
+
+@kernel(python=True)
+def _size_of_fresh_zeros(n):
+    return _fresh_zeros(n).size
+
+
+@kernel(python=True, runtime=True)
+def _sum_of_pair_with_runtime(first, second):
+    bundle = _pair(first, second)
+    return bundle[0].sum() + bundle[1].sum()
+
+
+@kernel(python=True)
+def _sum_of_pair(first, second):
+    bundle = _pair(first, second)
+    return bundle[0].sum() + bundle[1].sum()
+
+
+@kernel(python=True)
+def _doubled_in_place(values):
+    for i in range(values.size):
+        values[i] *= 2.0
+    return values
+
+
+def test_an_array_returned_by_a_kernel_with_the_runtime_to_one_without_is_refused_when_it_compiles():
+    with pytest.raises(TypeError, match=r"_size_of_fresh_zeros \(compiled without Numba's runtime\) receives arrays "
+                                        r".* where .*_fresh_zeros is compiled with Numba's runtime"):
+        _size_of_fresh_zeros(4)
+
+
+def test_an_array_returned_by_a_kernel_without_the_runtime_to_one_with_it_is_refused_when_it_compiles():
+    with pytest.raises(TypeError, match=r"_sum_of_pair_with_runtime \(compiled with Numba's runtime\) receives "
+                                        r"arrays .* where .*_pair is compiled without"):
+        _sum_of_pair_with_runtime(np.arange(4.0), np.ones(2))
+
+
+def test_kernels_without_the_runtime_pass_arrays_to_each_other_and_count_nothing():
+    import sys
+
+    first, second = np.arange(6.0), np.ones(2)
+    held = sys.getrefcount(first), sys.getrefcount(second)
+    for _ in range(3):
+        assert _sum_of_pair(first, second) == 17.0
+    assert (sys.getrefcount(first), sys.getrefcount(second)) == held
+
+
+def test_a_kernel_python_calls_may_not_return_an_array_without_the_runtime():
+    with pytest.raises(TypeError, match=r"_doubled_in_place is called from Python and returns arrays .* "
+                                        r"runtime=True"):
+        _doubled_in_place(np.ones(3))
+
+
+def test_the_cache_keys_a_kernel_by_its_options_so_a_changed_mode_compiles_again():
+    from numba.core.registry import cpu_target
+
+    def square(x):
+        return x * x
+
+    keys = {}
+    for runtime in (False, True):
+        dispatcher = kernel(runtime=runtime)(square)
+        keys[runtime] = dispatcher._cache._index_key((types.float64,), cpu_target.target_context.codegen())
+    assert keys[False][:-1] == keys[True][:-1] and keys[False][-1] != keys[True][-1]
+
+
+def test_no_kernel_returns_a_local_array():
+    """:func:`~soft_gripper_env.physics.kernels.local.local_array` lives on its function's stack: returned, it
+    would point at memory that the next call overwrites. Read from the source: no return statement of a kernel
+    names a variable bound to one (itself, sliced, or in a tuple)."""
+    import ast
+    import inspect
+
+    offenders, checked = [], 0
+    for name, dispatcher in _physics_dispatchers():
+        function = ast.parse(textwrap.dedent(inspect.getsource(dispatcher.py_func))).body[0]
+        local = set()
+        for node in ast.walk(function):
+            if isinstance(node, ast.Assign):
+                call = node.value.value if isinstance(node.value, ast.Subscript) else node.value
+                if isinstance(call, ast.Call) and getattr(call.func, "id", None) == "local_array":
+                    local |= {n.id for target in node.targets for n in ast.walk(target) if isinstance(n, ast.Name)}
+        checked += bool(local)
+        for node in ast.walk(function):
+            if isinstance(node, ast.Return) and node.value is not None:
+                returned = {n.id for n in ast.walk(node.value) if isinstance(n, ast.Name)} & local
+                if returned:
+                    offenders.append(f"{name} returns {sorted(returned)}")
+    assert checked > 10  # the kernels that make local arrays were read
+    assert not offenders, offenders
+
+
+@pytest.mark.parametrize("argument", ["python", "inline", "runtime"])
 def test_the_decorator_refuses_an_option_that_is_not_a_bool(argument):
     with pytest.raises(TypeError, match=f"kernel\\({argument}=...\\) must be a bool"):
         kernel(**{argument: "yes"})
@@ -67,6 +169,7 @@ def test_every_compiled_function_of_the_physics_is_made_by_the_one_decorator():
         options = dispatcher.targetoptions
         assert options.get("nogil") is True and options.get("error_model") == "numpy", name
         assert options.get("inline") in ("always", "never"), name
+        assert options.get("_nrt") in (True, False), f"{name} does not say whether it has the runtime"
         assert type(dispatcher._cache).__name__ != "NullCache", f"{name} is not cached"
         internal = options.get("no_cpython_wrapper", False)
         assert (type(dispatcher).__name__ == "KernelOnlyDispatcher") == internal, name

@@ -26,7 +26,8 @@ from soft_gripper_env.physics.kernels.contact import contact_reactions, object_i
 def reachable(obj, finger_directions, length, planar):
     """Which fingers the corrector searches for contact with ``obj`` (on the fingers' centre lines)."""
     reach = np.empty(finger_directions.shape[0], dtype=bool)
-    return within_reach(*object_in_rod_frames(obj, finger_directions, np.zeros(20), planar), length, reach)
+    within_reach(*object_in_rod_frames(obj, finger_directions, np.zeros(20), planar), length, reach)
+    return reach
 
 
 def segment_distance(points, start, end):

@@ -364,21 +364,30 @@ def test_an_integrator_other_than_backward_euler_is_refused_on_the_gpu():
         Simulator(scene, device="cuda")
 
 
-def test_local_array_is_numpys_empty_on_the_cpu():
-    """The kernels' small work arrays: on the CPU an uninitialised float64 array of the constant shape asked for,
-    a new one at every call."""
+def test_local_array_on_the_cpu_is_an_array_on_the_stack_of_each_call_site():
+    """The kernels' small work arrays: on the CPU a float64 array of the constant shape asked for, one per call
+    site, which a function compiled without Numba's runtime can make and which allocates nothing from the heap."""
+    from numba.core.runtime import _nrt_python, rtsys
 
-    @njit
-    def make():
+    def fill(first, second):
         vector, matrix = local_array(3), local_array((2, 6))
-        vector[:] = 1.0
-        matrix[:, :] = 2.0
-        return vector, matrix, local_array(3)
+        vector[:] = first
+        matrix[:, :] = second
+        part = local_array(3)[:2]
+        part[:] = 5.0
+        return vector.sum(), matrix.sum(), matrix.shape[0] * 100 + matrix.shape[1], part.sum(), vector.sum()
 
-    vector, matrix, other = make()
-    assert vector.shape == (3,) and matrix.shape == (2, 6) and vector.dtype == np.float64
-    assert vector.sum() == 3.0 and matrix.sum() == 24.0
-    assert not np.shares_memory(vector, other)
+    expected = (3.0, 24.0, 206, 10.0, 3.0)  # the other sites' writes did not reach the first array
+    assert njit(_nrt=False)(fill)(1.0, 2.0) == expected
+    with_runtime = njit(fill)
+    assert with_runtime(1.0, 2.0) == expected
+    _nrt_python.memsys_enable_stats()
+    try:
+        before = rtsys.get_allocation_stats().alloc
+        assert with_runtime(-1.0, 0.5) == (-3.0, 6.0, 206, 10.0, -3.0)
+        assert rtsys.get_allocation_stats().alloc == before
+    finally:
+        _nrt_python.memsys_disable_stats()
 
 
 def test_the_vector_env_checks_its_device():

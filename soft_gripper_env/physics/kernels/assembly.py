@@ -73,7 +73,7 @@ FINGERS_FIELD = RodArrays._fields.index("fingers")
 """Where the finger contact's constants are among the fields of :class:`RodArrays` (for its plain tuple)."""
 
 
-@kernel(python=True)
+@kernel(python=True, inline=True, runtime=True)  # inlined, its bundle is its caller's; from Python, a new one
 def named_rods(rods):
     """:class:`RodArrays` from its fields as plain tuples (:func:`~..solvers.newton.plain`), named again, the
     finger contact's too."""
@@ -180,7 +180,7 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, strained, veloci
     return energy
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # it allocates
 def assemble(q, step, rods, terms, hessian, force, band):
     """Every rod's force (R, N, S) [N] and −∂f/∂q (R, n, kd+1), written into ``force`` and ``band``."""
     n_nodes = q.shape[1]

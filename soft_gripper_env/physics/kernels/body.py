@@ -218,7 +218,7 @@ def _palm_contact(b, body, c, velocity, omega, orientation, vertical_mass, dt, l
         matrix[5, m] -= arm[0] * d_force[1, m] - arm[1] * d_force[0, m]
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # it allocates
 def palm_reactions(body, c, c_old, theta, orientation, orientation_old, dt, reaction):
     """Writes the force of every body on the palm (B, 3) [N] into ``reaction``, for bodies moved from ``c_old`` to
     ``c`` and turned by ``theta`` (B, 3) over the step; ``body`` holds the fields of :class:`BodyArrays` as a plain
@@ -397,9 +397,8 @@ def admissible_rotation(basis, theta):
 
 @kernel(python=True)
 def planar_body_basis(held, plane_normals, basis):
-    """The motions a free body held by planar fingers may make, into ``basis`` (B, 6, 6), which it returns, padded
-    with zero columns: any
-    translation; any rotation while no finger touches; while every touching finger's plane has the same normal,
+    """The motions a free body held by planar fingers may make, into ``basis`` (B, 6, 6), padded with zero columns:
+    any translation; any rotation while no finger touches; while every touching finger's plane has the same normal,
     rotation about it; else none (a rotation about another axis would carry held points out of a plane the finger
     cannot leave). ``held`` (R, N) marks held nodes, ``plane_normals`` (F, 3) the fingers' planes."""
     n_fingers = plane_normals.shape[0]
@@ -426,7 +425,6 @@ def planar_body_basis(held, plane_normals, basis):
         elif parallel:
             for k in range(3):
                 basis[b, 3 + k, 3] = plane_normals[first, k]
-    return basis
 
 
 @kernel

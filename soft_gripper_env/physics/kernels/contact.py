@@ -115,7 +115,7 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
 @kernel(python=True)
 def within_reach(starts, ends, radii, length, reach):
     """Which rods can touch an object given as they see it (segment ends (R, D), touching distances (R, N)), into
-    ``reach`` (R,) bool, which it returns: the object must exist in the rod's frame (some distance > 0) and its
+    ``reach`` (R,) bool: the object must exist in the rod's frame (some distance > 0) and its
     segment lie within ``length`` plus the largest distance of the palm, the rods' origin."""
     n_rods, dim = starts.shape
     palm = local_array(3)[:dim]
@@ -126,7 +126,6 @@ def within_reach(starts, ends, radii, length, reach):
         for i in range(1, radii.shape[1]):
             largest = max(largest, radii[r, i])
         reach[r] = largest > 0.0 and distance_to_segment(palm, starts[r], ends[r], nearest) < length + largest
-    return reach
 
 
 @kernel(python=True, inline=True)
@@ -154,7 +153,7 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
     than ``tolerance`` [m], and writes where it is held into ``hold_at`` (R, N, D): the point where its path over the
     step, relative to the object, entered the surface. ``old_positions`` (R, N, D) are the nodes at the start of the
     step and ``view.shift`` (R, D) the object's displacement over it. A node already inside at the start is
-    projected radially instead. Writes the number found per rod into ``found`` (R,) int, which it returns."""
+    projected radially instead. Writes the number found per rod into ``found`` (R,) int."""
     starts, ends, radii, searched, shifts = view
     n_rods, n_nodes, dim = positions.shape
     nearest = local_array(3)[:dim]
@@ -196,7 +195,6 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
             # after a few hundred steps (a 1-ulp move of a hold point grows through stick-slip), so it stays.
             for k in range(dim):
                 hold_at[r, i, k] = nearest[k] + (point[k] - nearest[k]) * radius / distance
-    return found
 
 
 @kernel(inline=True)

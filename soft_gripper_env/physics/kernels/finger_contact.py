@@ -116,7 +116,7 @@ def finger_scratch_size(n_fingers, n_nodes):
     return 3 * N_SCRATCH_POINTS + 3 * n_nodes + 9 + 4 * n_fingers * n_nodes + 5 * n_fingers * n_chunks
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # it allocates
 def finger_scratch(n_fingers, n_nodes):
     """The finger contact's work buffer (:func:`finger_views`), passed in so that the search and the forces allocate
     nothing (a GPU thread has no heap to allocate from); empty without finger contact (``n_fingers`` 0)."""

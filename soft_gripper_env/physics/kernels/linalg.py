@@ -201,7 +201,7 @@ def solve_factored_six_columns(a, x, free, first):
             x[k, 5] -= lik * x5
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # it allocates
 def solve_banded_symmetric_rod(a, x, free):
     """Solve A·x = b for one rod in place: ``x`` holds b on entry and the solution on return; ``a`` (n, kd+1) is
     overwritten by its factors. Returns False if a pivot was zero or not finite (``x`` is then NaN)."""

@@ -289,13 +289,13 @@ def elastic_scratch_size(n_nodes):
     return 13 * n_edges + n_nodes + 6 * 11 * 11 + N_STENCIL_VECTORS * 3 + 7 * 7
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # it allocates
 def elastic_scratch(n_nodes):
     """:func:`rod3d_elastic_rod`'s work buffer for rods of ``n_nodes`` nodes (0: empty, for the planar model)."""
     return np.empty(elastic_scratch_size(n_nodes))
 
 
-@kernel(python=True, inline=True)
+@kernel(python=True, inline=True, runtime=True)  # inlined, its views are its caller's; from Python, new ones
 def elastic_views(buffer, n_nodes):
     """The work arrays in ``buffer`` (:func:`elastic_scratch`): the edges' tangents, reference directors and material
     directors m1, m2 (N − 1, 3), the reference twist (N,), the edge lengths (N − 1,), :func:`_bend_twist`'s stencil
@@ -372,7 +372,7 @@ def rod3d_elastic_rod(q, tangent_old, director_old, ref_twist_old, rest_length, 
     return energy
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # it allocates
 def rod3d_elastic(q, tangent_old, director_old, ref_twist_old, rest_length, stretch_stiffness, bend_stiffness,
                   twist_stiffness, voronoi_length, natural_curvature, force, band, accumulate_hessian):
     """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 4) and ∇²E to ``band`` (R, 4N, 11).

@@ -143,7 +143,7 @@ def planar_elastic_rod(q, rest_length, stretch_stiffness, bend_stiffness, vorono
     return energy
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # it allocates
 def planar_elastic(q, rest_length, stretch_stiffness, bend_stiffness, voronoi_length, natural_curvature,
                    force, band, accumulate_hessian):
     """Elastic energy of every rod, (R,); adds −∇E to ``force`` (R, N, 2) and ∇²E to ``band`` (R, 2N, 6).

@@ -7,6 +7,10 @@ for a fixed object that never came: a third of the default env's first compile. 
 :func:`none_or` returns None where its first argument is None and ``build``'s result otherwise, and the choice is
 made from the argument's type (a Numba overload for every target, the CPU's and the GPU's), so one call site passes
 one type: the callee's arguments for a free body, or None.
+
+On the CPU the overload compiles in ``build``'s reference-counting mode (:mod:`~.compiled`), which its callers
+must share; left to itself, it would take the mode of whichever kernel compiled it first. (Inlining it into its
+callers instead, Numba's ``inline="always"`` for overloads, gave wrong steps.)
 """
 
 from __future__ import annotations
@@ -22,7 +26,10 @@ def none_or(build):
     def chosen(value, *rest):
         return None if value is None else build(value, *rest)
 
-    @overload(chosen, target="generic")
+    options = getattr(build, "targetoptions", {})
+    jit_options = {"_nrt": options["_nrt"]} if "_nrt" in options else {}
+
+    @overload(chosen, target="generic", jit_options=jit_options)
     def _typed(value, *rest):
         if isinstance(value, types.NoneType):
             return lambda value, *rest: None

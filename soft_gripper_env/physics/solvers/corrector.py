@@ -126,7 +126,7 @@ class CorrectorWork(NamedTuple):
     """Newton's scratch for one gripper."""
 
 
-@kernel
+@kernel(runtime=True)  # it allocates
 def corrector_work(q, dim, n_fingers, free_body, finger_contact):
     """:class:`CorrectorWork` for the rods of ``q`` (R, N, S) with ``dim`` position coordinates and ``n_fingers``
     rods per gripper, against a ``free_body`` or a fixed object, with or without ``finger_contact``."""
@@ -140,7 +140,7 @@ def corrector_work(q, dim, n_fingers, free_body, finger_contact):
                          np.empty((n_bases, 6, 6)), new_work(q, dim, n_fingers, free_body, True, finger_contact))
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # its scratch is allocated here
 def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result):
     """The predictor–corrector for every gripper of a batch (see the module notes): :func:`correct_contacts` with
     its scratch made here. Every bundle arrives as its fields in plain tuples (:func:`~.newton.plain`)."""
@@ -168,7 +168,7 @@ def correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, fre
     _correct(q, step, rods, terms, solver, holds, hold_at, geometry, named_free_body(free_body), result, work)
 
 
-@kernel
+@kernel(runtime=True)  # its bundle goes to the step's entry point, which has the runtime
 def _named_free_body(free_body):
     """The bodies' arrays and their unknowns as plain tuples, named (:class:`~..kernels.body.BodyArrays`,
     :class:`~..kernels.body.BodyMotion`)."""
@@ -186,8 +186,10 @@ named_free_body = none_or(_named_free_body)
 def _body_coupling(moving, geometry, held, dim, basis_work):
     """What couples the rods to the ``moving`` bodies in Newton's method (:class:`~.newton.BodyCoupling`): in 3-D
     every motion of a body, planar the motions in the plane that its held nodes leave it."""
-    basis = geometry.any_motion if dim == 3 else planar_body_basis(held, geometry.plane_normals, basis_work)
-    return BodyCoupling(moving[0], moving[1], basis)
+    if dim == 3:
+        return BodyCoupling(moving[0], moving[1], geometry.any_motion)
+    planar_body_basis(held, geometry.plane_normals, basis_work)
+    return BodyCoupling(moving[0], moving[1], basis_work)
 
 
 body_coupling = none_or(_body_coupling)
@@ -224,8 +226,8 @@ def _correct(q, step, rods, terms, solver, holds, hold_at, geometry, moving, res
                result, work.newton)
         if moving is not None:
             _body_at_solution(step, solver, holds, geometry, moving[0], moving[1], rotation, shift)
-        view = ObjectView(starts, ends, radii, within_reach(starts, ends, radii, solver.finger_length, work.reach),
-                          shift)
+        within_reach(starts, ends, radii, solver.finger_length, work.reach)
+        view = ObjectView(starts, ends, radii, work.reach, shift)
         within_budget = k < solver.max_corrector_iterations
         anchors = hold_at if moving is None else _anchors(holds, moving[1], n_fingers, work.anchors)
         contact_changes(positions, old_positions, anchors, result.residual, holds, view, geometry.friction, solver,

@@ -49,7 +49,7 @@ from ..kernels.compiled import kernel
 from ..kernels.current import CurrentBatch, current_velocity
 from ..kernels.finger_contact import finger_scratch_size
 from ..kernels.forces import project_water
-from ..kernels.local import local_array
+from ..kernels.local import constant_shape, local_array
 from ..kernels.rod_3d import elastic_scratch_size, elastic_views, rod_frames
 from ..scene.forces import ForceTerms
 from ..scene.scene import STEP_HALVINGS_LIMIT
@@ -108,20 +108,13 @@ _registered = False
 
 def _register_local_array() -> None:
     """Teaches numba-cuda :func:`~..kernels.local.local_array` once: on the GPU its call is the thread's own array
-    of that constant shape, as ``cuda.local.array`` makes it (the CPU's ``np.empty`` needs a heap)."""
+    of that constant shape, as ``cuda.local.array`` makes it (the CPU's is an array on the function's stack)."""
     global _registered
     if _registered:
         return
     from numba.cuda import cudadecl, cudaimpl
     from numba.cuda.cudadrv import nvvm
     from numba.cuda.typing.templates import AbstractTemplate, signature
-
-    def constant_shape(shape):
-        if isinstance(shape, types.IntegerLiteral):
-            return (shape.literal_value,)
-        if isinstance(shape, types.BaseTuple) and all(isinstance(s, types.IntegerLiteral) for s in shape):
-            return tuple(s.literal_value for s in shape)
-        return None
 
     @cudadecl.register
     class LocalArray(AbstractTemplate):
@@ -791,7 +784,9 @@ def _launch(cuda, kernel, n_grippers: int, arguments: tuple, host: list, device:
     time to ``seconds`` (:func:`_phases`)."""
     begin = time.perf_counter()
     blocks = (n_grippers + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
-    if getattr(kernel, "overloads", None):  # compiled (at its first launch): no scan of the modules per action
+    if getattr(kernel, "overloads", None) or simulated(cuda):
+        # compiled (at its first launch): no scan of the modules per action; the simulator's threads call the CPU's
+        # kernels, which compile (and are cached) as the CPU's own, inlined calls and reference counting unchanged
         kernel[blocks, THREADS_PER_BLOCK](*arguments)
     else:
         with calls_kept_apart():

@@ -312,7 +312,7 @@ class NewtonWork(NamedTuple):
     last_ratio: np.ndarray
 
 
-@kernel
+@kernel(runtime=True)  # it allocates
 def new_work(q, dim, n_fingers, coupled, contact, fingers):
     """The work arrays; those only a body's solve (``coupled``), a contact's (``contact``) or the line search of
     fingers touching each other (``fingers``) uses are empty, and shared, otherwise: every allocation counts in the
@@ -835,7 +835,7 @@ def _finish_gripper(first, n_fingers, converged, iterations, ratio, result):
         result.ratio[r] = ratio
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # it allocates
 def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water, dt, rods, terms, solver, midpoint,
                  q, velocity, acceleration):
     """A whole backward-Euler step of rods that move on their own, in one call (the hot path of a scene without
@@ -930,7 +930,7 @@ def _midpoint_end_rod(r, q_old, velocity_old, q, velocity):
             velocity[r, i, k] = 2.0 * velocity[r, i, k] - velocity_old[r, i, k]
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # it allocates
 def per_gripper(converged, iterations, ratio, n_fingers):
     """A step's per-rod Newton results (R,) per gripper (B,): whether every finger converged, the most iterations,
     and the largest residual ratio (NaN read as inf)."""

@@ -159,7 +159,7 @@ class StepWork(NamedTuple):
     corrector_work: CorrectorWork
 
 
-@kernel
+@kernel(runtime=True)  # it allocates
 def step_work(state, n_fingers, dim, finger_contact, free_body):
     """:class:`StepWork` for the batch of ``state`` (:class:`WorkingState`) with ``n_fingers`` rods per gripper and
     ``dim`` position coordinates, with or without ``finger_contact``, against a ``free_body`` or a fixed object."""
@@ -177,7 +177,7 @@ def step_work(state, n_fingers, dim, finger_contact, free_body):
                     np.arange(n_grippers), corrector_work(state.q, dim, n_fingers, free_body, finger_contact))
 
 
-@kernel
+@kernel(runtime=True)  # it allocates
 def _like(state):
     """A :class:`WorkingState` of new arrays shaped as ``state``'s."""
     return WorkingState(np.empty_like(state.q), np.empty_like(state.q), np.empty_like(state.q),
@@ -247,7 +247,7 @@ def commit_step(dt, grippers, ok, new, iterations, normal_reaction, reaction, st
         interval.clock[b] += dt
 
 
-@kernel(python=True)
+@kernel(python=True, runtime=True)  # its scratch is allocated here
 def take_steps(first, n_steps, dt, times, currents, state, rods, terms, solvers, geometry, projection, body,
                interval):
     """:func:`step_batch` with its scratch made here: the CPU's entry point."""
@@ -256,7 +256,7 @@ def take_steps(first, n_steps, dt, times, currents, state, rods, terms, solvers,
                       interval, work)
 
 
-@kernel(python=True, inline=True)
+@kernel(python=True, inline=True, runtime=True)  # inlined into take_steps; the CUDA simulator's threads call it
 def step_batch(first, n_steps, dt, times, currents, state, rods, terms, solvers, geometry, projection, body,
                interval, work):
     """Steps ``first`` … ``n_steps`` − 1 of length ``dt`` [s] of every running gripper, from and into ``state``
@@ -403,7 +403,7 @@ def step_batch(first, n_steps, dt, times, currents, state, rods, terms, solvers,
     return n_steps
 
 
-@kernel(python=True)  # the host's halving and the CUDA simulator's threads call it from Python
+@kernel(python=True, runtime=True)  # the host's halving and the CUDA simulator's threads take its views in Python
 def gripper_views(b, n_fingers, held_by_body, framed, bodies, moving, state, geometry, interval, currents):
     """Gripper ``b``'s rows of a batch, as a batch of one (views): its :class:`WorkingState`, contact geometry,
     :class:`Interval` and currents, from the batch's (those bundles, or their fields as plain tuples).
@@ -430,7 +430,7 @@ def gripper_views(b, n_fingers, held_by_body, framed, bodies, moving, state, geo
     return own, own_geometry, own_interval, own_currents
 
 
-@kernel(python=True)  # the host's halving and the CUDA simulator's threads call it from Python
+@kernel(python=True, runtime=True)  # the host's halving and the CUDA simulator's threads take its views in Python
 def gripper_body(body, b):
     """Gripper ``b``'s row of the free bodies' arrays (:class:`~..kernels.body.BodyArrays`' fields)."""
     return (body[0][b:b + 1], body[1][b:b + 1], body[2][b:b + 1], body[3][b:b + 1], body[4][b:b + 1],
@@ -439,7 +439,7 @@ def gripper_body(body, b):
             body[16], body[17])
 
 
-@kernel
+@kernel(runtime=True)  # its bundle goes to the step's entry point, which has the runtime
 def _with_motion(body, motion):
     return body, motion
 
