@@ -862,7 +862,7 @@ def advance_rods(q_old, velocity_old, acceleration_old, natural_curvature, water
     return per_gripper(result.converged, result.iterations, result.ratio, solver.n_fingers)
 
 
-@kernel(python=True, inline=True)
+@kernel(python=True)
 def step_gripper_rods(b, velocity_old, acceleration_old, step, rods, terms, solver, midpoint, q, velocity,
                       acceleration, every_rod, result, work):
     """Gripper b's rods, on their own, through one backward-Euler step from ``step.q_old`` (:func:`advance_rods`,
