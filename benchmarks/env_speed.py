@@ -272,7 +272,7 @@ def plot(results: dict, sizes: tuple[int, ...], path: Path) -> None:
     ax.axhline(1.0, color="k", lw=1.5, label=f"Ant-v5 ({ant:,.0f} steps/s in this run)")
     for (key, goal), marker in zip(GOALS.items(), ("s", "D", "s", "D"), strict=True):
         color = "C1" if "3d" in key else "C0"
-        x = 64 if key.startswith("vec64") else sizes[0]
+        x = 64 if key.startswith("vec64") else 1  # the one-env goals belong to gym.make, drawn at 1
         ax.scatter([x], [goal], marker=marker, facecolor="none", edgecolor=color, s=90, zorder=3)
     ax.scatter([], [], marker="s", facecolor="none", edgecolor="0.3", label="goal, one env (at num_envs = 1)")
     ax.scatter([], [], marker="D", facecolor="none", edgecolor="0.3", label="goal, make_vec(64)")

@@ -15,10 +15,12 @@ jump to a wrapper that was never built).
 **Most kernels also run without Numba's reference counts** (its runtime, NRT). With the runtime every array a
 function binds, each member of a bundle of twenty included, is counted up and down again, and those counts were a
 quarter of a 3-D env step and a third of a planar one. A kernel that allocates (``np.empty``) needs the runtime, and
-so does one that Python calls; every other kernel leaves it out. The two kinds may pass arrays to each other as
-arguments (borrowed, neither side counts them), but an array *returned* from one kind to the other would be
-released twice or never, so a kernel whose compiled code returns arrays across that boundary is refused when it
-compiles, naming both functions (:func:`_refuse_arrays_returned_across_the_runtime_boundary`).
+so does one that returns arrays to Python: ``@kernel(runtime=True)``. Every other kernel leaves it out (there an
+allocation fails to compile: Numba finds "no implementation" of ``np.empty``), and an inlined kernel's copies take
+their caller's mode. The two kinds may pass arrays to each other as arguments (borrowed, neither side counts them),
+but an array *returned* from one kind to the other would be released twice or never, so a kernel whose compiled
+code receives one across that boundary is refused when it compiles, naming both functions
+(:func:`_refuse_arrays_returned_across_the_runtime_boundary`).
 """
 
 from __future__ import annotations
@@ -78,8 +80,7 @@ def _refuse_arrays_returned_across_the_runtime_boundary(dispatcher, cres) -> Non
         return
     runtime = _has_runtime(dispatcher)
     caller = f"{dispatcher.py_func.__module__}.{dispatcher.py_func.__qualname__}"
-    if not runtime and isinstance(dispatcher, KernelDispatcher) and not isinstance(dispatcher, KernelOnlyDispatcher) \
-            and _holds_array(cres.signature.return_type):
+    if not runtime and not isinstance(dispatcher, KernelOnlyDispatcher) and _holds_array(cres.signature.return_type):
         raise TypeError(
             f"{caller} is called from Python and returns arrays ({_brief(cres.signature.return_type)}) but is compiled "
             "without Numba's runtime, which Python's reference to a returned array needs: give it "
@@ -157,8 +158,6 @@ def kernel(function=None, *, python: bool = False, inline: bool = False, runtime
     for name, value in (("python", python), ("inline", inline), ("runtime", runtime)):
         if not isinstance(value, bool):
             raise TypeError(f"kernel({name}=...) must be a bool, got {value!r}")
-    if not isinstance(runtime, bool):
-        raise TypeError(f"kernel(runtime=...) must be a bool, got {runtime!r}")
 
     def compile_later(function):
         if config.DISABLE_JIT:

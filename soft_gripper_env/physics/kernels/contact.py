@@ -91,9 +91,8 @@ def contact_reactions(q, residual, held, friction, starts, ends, finger_directio
             for k in range(dim):
                 rubbing |= friction[r, i, k] != 0.0
             # A node neither held nor rubbing feels nothing of the object: its reaction is the zero below, so the
-            # geometry (a fifth of a free env step's reference counts when every node took it) is skipped. On the
-            # segment itself (a planar section shrunk to a point) the normal is undefined and the object's surface
-            # there faces out of the finger's plane: no normal reaction within it.
+            # geometry is skipped. On the segment itself (a planar section shrunk to a point) the normal is undefined
+            # and the object's surface there faces out of the finger's plane: no normal reaction within it.
             on_surface = (held[r, i] or rubbing) and outward_normal(q[r, i, :dim], start, end, nearest, unit)
             if on_surface:  # a sliding node's friction acts along the surface at its current point, as in the solve
                 along_surface(friction[r, i], unit, acting)
@@ -163,7 +162,7 @@ def find_penetrations(positions, old_positions, view, held, first_free_node, tol
         found[r] = 0
         if not searched[r]:
             continue
-        start, end = starts[r], ends[r]  # views taken once per rod: each costs reference counts
+        start, end = starts[r], ends[r]  # views taken once per rod
         for i in range(first_free_node, n_nodes):
             radius = radii[r, i]
             if held[r, i] or radius <= 0.0:

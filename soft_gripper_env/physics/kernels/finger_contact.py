@@ -246,7 +246,7 @@ def near_fingers_of_gripper(first_rod, q_old, q_pred, contact, near, scratch):
             bounds[o, c] = bound
     for f in range(n_fingers):
         for i in range(n_nodes):
-            node = old[f, i]  # views taken out of the loops below: each costs reference counts
+            node = old[f, i]  # views taken out of the loops below
             for o in range(n_fingers):
                 if o == f:
                     continue

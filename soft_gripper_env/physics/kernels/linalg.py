@@ -27,7 +27,7 @@ def symmetric_band_entry(band, i, j):
 def scatter_contiguous(band, offset, hessian, m):
     """Add the symmetric m×m ``hessian`` of DOFs offset … offset+m−1 into one rod's band (n, kd+1)."""
     kd = band.shape[1] - 1
-    for a in range(m):  # indexed in place: a view of each row would cost reference counts
+    for a in range(m):  # indexed in place, no view of each row
         for b in range(a + 1):
             band[offset + a, kd - a + b] += hessian[a, b]
 
@@ -57,7 +57,7 @@ def factor_banded_symmetric(a, free, row_scratch):
         # m < k, four chains the CPU overlaps, where one k at a time waits on each subtraction's latency (the same
         # subtractions in the same order). Each t_k's L[i,k] and its term of the pivot d_i follow at once, so that
         # the division overlaps the next sums, where a loop of its own after them waited on each. Row i is indexed
-        # in place: a view of it, kept across these loops, cost reference counts at every k. Kernel alone, planar
+        # in place. Kernel alone, planar
         # and 3-D: two k's at a time and the indexing took a fifth off the factorisation; a while loop instead of a
         # range with a step of 2 a further fifth; the pivot's terms in this loop a seventh planar and a tenth in
         # 3-D; four k's instead of two a further seventh (which, before the while loop, had gained nothing)

@@ -165,7 +165,7 @@ def _bend_twist(te, tf, le, lf, m1e, m2e, m1f, m2f, twist, kappa_bar, eb, gj, st
     w3 = gj * twist
     energy = 0.5 * eb * (dk1 * dk1 + kappa2 * kappa2) + 0.5 * gj * twist * twist
     # gradients of κ1, κ2 and the twist over the stencil, as (position blocks, θ_e, θ_f): rows 0, 1, 2 of
-    # ``stencil[2]``, indexed in place (a view of each row, made per node, would cost reference counts)
+    # ``stencil[2]``, indexed in place (no view of each row made per node)
     for k in range(3):
         stencil[2, 0, k], stencil[2, 0, 4 + k], stencil[2, 0, 8 + k] = -dk1de[k], dk1de[k] - dk1df[k], dk1df[k]
         stencil[2, 1, k], stencil[2, 1, 4 + k], stencil[2, 1, 8 + k] = -dk2de[k], dk2de[k] - dk2df[k], dk2df[k]
@@ -276,8 +276,8 @@ def _cross_matrix_entry(vectors, row, i, j):
 
 
 # The work arrays of one rod's assembly are views of one flat buffer (:func:`elastic_scratch`), passed in so that
-# the assembly allocates nothing (a GPU thread has no heap to allocate from). One array rather than nine, because
-# every array in a bundle costs reference counts each time Newton's inlined levels bind the bundle again.
+# the assembly allocates nothing (a GPU thread has no heap to allocate from). One array rather than nine, so that
+# the bundles Newton's levels pass on stay short.
 
 
 @kernel(python=True)

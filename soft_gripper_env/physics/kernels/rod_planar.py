@@ -30,8 +30,7 @@ import numpy as np
 from .compiled import kernel
 
 # The energy terms of one edge or node are numbers in, numbers out, without a branch, and the rod's loop writes them
-# into its arrays: an inlined helper that took the arrays and branched on the Hessian kept Numba's reference counts
-# for binding them at each node (per basic block, LLVM removes those pairs only where nothing branches).
+# into its arrays.
 
 
 @kernel(inline=True)

@@ -348,7 +348,7 @@ def contact_changes(positions, old_positions, anchors, residual, holds, view, fr
 
     ``found`` (R,) int is scratch.
     """
-    # the bundles' members taken out once: read in the branches below, each would cost reference counts
+    # the bundles' members taken out once, for the branches below
     adhesive, new_hold, changed = changes.adhesive, changes.new_hold, changes.changed
     slide, new_friction, stuck_again, hold_at = changes.slide, changes.friction, changes.stuck_again, changes.hold_at
     held, sliding, old_friction = holds.held, holds.sliding, holds.friction

@@ -160,10 +160,10 @@ def simulated(cuda) -> bool:
 def calls_kept_apart():
     """While a kernel compiles for the GPU: the shared functions that the CPU inlines at Numba's IR level
     (``inline="always"``) are compiled as device functions instead, once per signature, and NVVM inlines them at
-    the LLVM level as it sees fit. The CPU inlines them to keep reference counts out of Newton's loops, which a GPU
-    build does not have; copying each one's IR into every caller made the grasp kernel's compile several times
-    longer (the IR's deep copies took two thirds of it). The CPU dispatchers' option is restored on leaving, so a
-    CPU compile must not run meanwhile (kernels compile on their first launch, from the simulator's thread)."""
+    the LLVM level as it sees fit. Copying each one's IR into every caller made the grasp kernel's compile several
+    times longer (the IR's deep copies took two thirds of it). The CPU dispatchers' option is restored on leaving,
+    so a CPU compile must not run meanwhile (a GPU kernel compiles on its first launch; the CUDA simulator's launches
+    do not enter this: their threads call the CPU's kernels)."""
     inlined = []
     for name, module in list(sys.modules.items()):
         if not name.startswith(_PHYSICS) or module is None:

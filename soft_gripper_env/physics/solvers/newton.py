@@ -345,7 +345,7 @@ def new_work(q, dim, n_fingers, coupled, contact, fingers):
 @kernel(inline=True)
 def _solve_gripper(b, q, step, rods, terms, solver, free, holds, coupling, solve, result, work):
     """Newton's method for gripper b's rods where ``solve`` is True (all of them, and the body, with a free body)."""
-    # arrays taken out of their bundles once: a bundle's member read in a loop costs a reference count each time
+    # arrays taken out of their bundles once, before the loops
     active, touching, rod_ratio, factored = work.active, work.touching, work.rod_ratio, work.factored
     converged, iterations_of, ratio = result.converged, result.iterations, result.ratio
     residual, mass_term, bands, x0 = result.residual, solver.mass_term, work.bands, work.x0
@@ -490,9 +490,8 @@ def _rod_system(r, q, step, rods, terms, solver, measured, holds, fixed_object, 
     """Rod r's Newton system at ``q``: its sliding nodes put onto the object's surface where the object is
     ``fixed_object`` (a free body's follow the body instead), then :func:`_rod_equations`. Returns the rod's largest
     scaled residual and ``largest``."""
-    # whether the object is fixed comes as a flag, not as the coupling itself: this runs once per rod and Newton
-    # iteration, and binding the coupling's two dozen arrays each time cost about a thousand reference-count
-    # operations per planar env step (tools/refcounts.py)
+    # whether the object is fixed comes as a flag, not as the coupling itself, whose two dozen arrays this would
+    # bind once per rod and Newton iteration
     if holds is not None and fixed_object:
         _slide_on_fixed_object(r, q, holds, normals)
     return _rod_equations(r, q, step, rods, terms, solver, measured, holds, residual, right_hand_side, largest, band,
@@ -649,7 +648,7 @@ def _slide_rows(r, holds, normals, residual, right_hand_side, band, tolerance_in
 def _unrotate_steps(first_rod, holds, work):
     """Turns the Newton steps of every active rod's sliding nodes, x0 and X (work), from their surface frames back
     into the rod's coordinates."""
-    # the bundles' members taken out once: read in the branches below, each would cost reference counts
+    # the bundles' members taken out once, for the branches below
     normals, basis, active, x0, x_coupling = work.normals, work.basis, work.active, work.x0, work.x_coupling
     held, sliding = holds.held, holds.sliding
     dim = basis.shape[0]
@@ -686,7 +685,7 @@ def _rod_residual(r, q, step, rods, terms, solver, free, residual, right_hand_si
     (N, D) and the 3-D energy's and the finger contact's buffers. Returns the rod's largest scaled residual and
     ``largest`` updated with it (NaN is caught: it never compares as small)."""
     # the caller passes rows and work arrays it took out of their bundles once per solve: this runs once per rod and
-    # Newton iteration, and each bundle member or array view read here would cost an atomic reference count
+    # Newton iteration
     force, strained, velocity, acceleration, elastic, fingers = scratch
     assemble_rod(r, q, step, rods, terms, matrix, force, band, strained, velocity, acceleration, elastic, fingers)
     own = 0.0
