@@ -81,6 +81,25 @@ def _doubled_in_place(values):
     return values
 
 
+@kernel
+def _allocates_without_the_runtime(n):
+    return np.zeros(n).sum()
+
+
+@kernel(python=True)
+def _calls_a_kernel_that_allocates_without_the_runtime(n):
+    return _allocates_without_the_runtime(n)
+
+
+def test_an_allocation_without_the_runtime_fails_to_compile_naming_the_kernel_and_the_fix():
+    from numba.core.errors import TypingError
+
+    with pytest.raises(TypingError, match=r"(?s)_allocates_without_the_runtime is compiled without Numba's runtime.*"
+                                          r"@kernel\(runtime=True\)") as raised:
+        _calls_a_kernel_that_allocates_without_the_runtime(3)
+    assert "_calls_a_kernel_that_allocates_without_the_runtime is compiled" not in str(raised.value)
+
+
 def test_an_array_returned_by_a_kernel_with_the_runtime_to_one_without_is_refused_when_it_compiles():
     with pytest.raises(TypeError, match=r"_size_of_fresh_zeros \(compiled without Numba's runtime\) receives arrays "
                                         r".* where .*_fresh_zeros is compiled with Numba's runtime"):

@@ -26,7 +26,7 @@ code receives one across that boundary is refused when it compiles, naming both 
 from __future__ import annotations
 
 from numba import config
-from numba.core import ir, types
+from numba.core import errors, ir, types
 from numba.core.caching import FunctionCache
 from numba.core.registry import CPUDispatcher
 from numba.core.typing.templates import _OverloadFunctionTemplate, _OverloadMethodTemplate
@@ -34,6 +34,14 @@ from numba.core.typing.templates import _OverloadFunctionTemplate, _OverloadMeth
 _OPTIONS = {"nopython": True, "boundscheck": None, "nogil": True, "error_model": "numpy"}
 """The target options every kernel compiles with (``boundscheck`` None: Numba's own default, settable by its
 environment variable)."""
+
+
+_NUMBA_WITHOUT_RUNTIME = "Only accept returning of array passed into the function as argument"
+"""What Numba says where a function compiled without its runtime makes an array (its allocating overloads return one
+they did not take)."""
+
+
+_ALLOCATES = "is compiled without Numba's runtime, which making an array"
 
 
 def _holds_array(numba_type) -> bool:
@@ -131,6 +139,19 @@ class KernelDispatcher(CPUDispatcher):
     def add_overload(self, cres):
         _refuse_arrays_returned_across_the_runtime_boundary(self, cres)
         super().add_overload(cres)
+
+    def compile(self, sig):
+        try:
+            return super().compile(sig)
+        except errors.NumbaError as error:
+            # Numba's own words for an allocation without the runtime do not say what to change; said once, by the
+            # kernel that allocates (its callers see the same words in their error)
+            message = str(error)
+            if not _has_runtime(self) and _NUMBA_WITHOUT_RUNTIME in message and _ALLOCATES not in message:
+                error.patch_message(f"{error.args[0]}\n{self.py_func.__module__}.{self.py_func.__qualname__} "
+                                    f"{_ALLOCATES} (np.empty, np.zeros, a copy) needs: give it @kernel(runtime=True), "
+                                    "or take the array as an argument (a work array, or kernels.local.local_array)")
+            raise
 
     def enable_caching(self):
         self._cache = _KernelCache(self)
