@@ -148,7 +148,7 @@ def solve_with_contact(q, step, rods, terms, solver, holds, hold_at, geometry, f
     correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result, work)
 
 
-@kernel
+@kernel(inline=True)
 def correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, free_body, result, work):
     """The predictor–corrector for every gripper of a batch (see the module notes), with the scratch ``work``
     (:class:`CorrectorWork`).
@@ -168,7 +168,7 @@ def correct_contacts(q, step, rods, terms, solver, holds, hold_at, geometry, fre
     _correct(q, step, rods, terms, solver, holds, hold_at, geometry, named_free_body(free_body), result, work)
 
 
-@kernel
+@kernel(runtime=True)  # its bundle goes to the step's entry points, which have the runtime
 def _named_free_body(free_body):
     """The bodies' arrays and their unknowns as plain tuples, named (:class:`~..kernels.body.BodyArrays`,
     :class:`~..kernels.body.BodyMotion`)."""

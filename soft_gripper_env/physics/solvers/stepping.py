@@ -256,7 +256,7 @@ def take_steps(first, n_steps, dt, times, currents, state, rods, terms, solvers,
                       interval, work)
 
 
-@kernel(python=True)
+@kernel(python=True, inline=True, runtime=True)  # inlined into take_steps; the CUDA simulator's threads call it
 def step_batch(first, n_steps, dt, times, currents, state, rods, terms, solvers, geometry, projection, body,
                interval, work):
     """Steps ``first`` … ``n_steps`` − 1 of length ``dt`` [s] of every running gripper, from and into ``state``
@@ -439,7 +439,7 @@ def gripper_body(body, b):
             body[16], body[17])
 
 
-@kernel
+@kernel(runtime=True)  # its bundle goes to the step's entry point, which has the runtime
 def _with_motion(body, motion):
     return body, motion
 
