@@ -216,38 +216,92 @@ def _arrays_reachable_from(root) -> list[np.ndarray]:
     return found
 
 
+def _leaks(root, step, repeats: int) -> tuple[int, int, list]:
+    """Runs ``step()`` ``repeats`` times and returns how many of Numba's arrays it made and freed, and the arrays
+    reachable from ``root`` whose Python reference count grew meanwhile (its ``(before, after, shape)``)."""
+    import sys
+
+    from numba.core.runtime import _nrt_python, rtsys
+
+    arrays = _arrays_reachable_from(root)  # held here, so the same holders both times
+    before = [sys.getrefcount(a) for a in arrays]
+    _nrt_python.memsys_enable_stats()  # Numba's own allocations, which Python's counts cannot see
+    try:
+        allocated = rtsys.get_allocation_stats()
+        for _ in range(repeats):
+            step()
+        allocated_after = rtsys.get_allocation_stats()
+    finally:
+        _nrt_python.memsys_disable_stats()
+    after = [sys.getrefcount(a) for a in arrays]  # counted as before was, with the same temporaries
+    assert len(arrays) > 20  # the state's and the simulator's own arrays were seen
+    grown = [(was, now, a.shape) for a, was, now in zip(arrays, before, after, strict=True) if now > was]
+    return allocated_after.mi_alloc - allocated.mi_alloc, allocated_after.mi_free - allocated.mi_free, grown
+
+
 @pytest.mark.parametrize("model", ["3d", "planar"])
 def test_env_steps_leave_no_array_referenced_more_than_before(model):
     """Every array Python hands the kernels comes back with its reference count as it was, and every array the
     kernels make is freed: a kernel that kept a reference (a bundle returned across the boundary between code
     compiled with Numba's reference counting and code without it, docs/notes/compile_time.md) would leave an
     array one reference higher per call, and never free it."""
-    import sys
-
     import gymnasium as gym
-    from numba.core.runtime import _nrt_python, rtsys
 
     env = gym.make("SoftGripperUnderwater-v0", model=model)
     env.reset(seed=0)
     closing = np.full(env.action_space.shape, -0.6, dtype=np.float32)
-
     for _ in range(8):  # the fingers reach the sphere: the corrector and the free body's coupling run
         env.step(closing)
-    arrays = _arrays_reachable_from(env.unwrapped)  # held here, so the same holders both times
-    before = [sys.getrefcount(a) for a in arrays]
-    _nrt_python.memsys_enable_stats()  # Numba's own allocations, which Python's counts cannot see
-    try:
-        allocated = rtsys.get_allocation_stats()
-        steps = 12
-        for _ in range(steps):
-            env.step(closing)
-        allocated_after = rtsys.get_allocation_stats()
-    finally:
-        _nrt_python.memsys_disable_stats()
-    made, freed = allocated_after.mi_alloc - allocated.mi_alloc, allocated_after.mi_free - allocated.mi_free
-    assert made > 0 and freed == made, f"{made} of Numba's arrays made over {steps} env steps, {freed} freed"
-    after = [sys.getrefcount(a) for a in arrays]  # counted as before was, with the same temporaries
-    grown = [(was, now, a.shape) for a, was, now in zip(arrays, before, after, strict=True) if now > was]
-    assert len(arrays) > 50  # the state's, the task's and the simulator's own arrays were seen
-    assert not grown, f"{len(grown)} arrays gained references over {steps} env steps: {grown[:5]}"
+    made, freed, grown = _leaks(env.unwrapped, lambda: env.step(closing), 12)
+    assert made > 0 and freed == made, f"{made} of Numba's arrays made over 12 env steps, {freed} freed"
+    assert not grown, f"{len(grown)} arrays gained references over 12 env steps: {grown[:5]}"
     env.close()
+
+
+@pytest.mark.parametrize("path", ["halved on the host", "one step at a time", "rods alone"])
+def test_the_simulators_other_entry_points_leave_no_array_referenced_more_than_before(path):
+    """The same for the simulator's compiled entry points besides the env's: a batch whose steps the host halves
+    for some grippers (``gripper_views``, ``gripper_body`` and ``take_steps`` on one gripper's rows), ``step``'s
+    predictor–corrector against the paper's fixed ball (``solve_with_contact``), and fingers with nothing to grasp
+    (``advance_rods``)."""
+    from dataclasses import replace
+
+    from soft_gripper_env.grasp_task import GraspTask, task_episode
+    from soft_gripper_env.physics import PAPER_BALL, NewtonSettings, Simulator, paper_scene
+
+    if path == "halved on the host":  # two Newton iterations are too few for the impacts: steps are halved
+        rng = np.random.default_rng(3)
+        scenes = [replace(task_episode(GraspTask(model="planar"), rng, {}).scene,
+                          newton=NewtonSettings(max_iterations=2)) for _ in range(4)]
+        sim = Simulator(scenes)
+        halved = []
+        halve = sim._halve_pending
+        sim._halve_pending = lambda *args: (halved.append(len(args[-1])), halve(*args))
+        state = sim.initial_state()
+        rate = np.array([[-1.0] * 3, [-0.6] * 3, [0.0] * 3, [-1.0] * 3])
+
+        def step():
+            sim.advance(state, np.full((4, 3), -0.2), rate, 5)
+    elif path == "one step at a time":
+        sim = Simulator(paper_scene("planar", grasped_object=PAPER_BALL))
+        state = sim.initial_state()
+        for k in range(1, 101):  # the paper's ramp closes the fingers onto the ball in its second
+            state = sim.step(state, np.full((1, 3), -0.15 * k * sim.scene.time_step)).state
+
+        def step():
+            sim.step(state, np.full((1, 3), -0.15))
+    else:
+        sim = Simulator(paper_scene("3d"))
+        state = sim.initial_state()
+
+        def step():
+            sim.step(state, np.full((1, 3), -0.15))
+
+    step()  # compiled (or loaded), and each scratch array the first call makes once
+    made, freed, grown = _leaks(sim, step, 6)
+    if path == "halved on the host":
+        assert halved, "no step was halved on the host"
+    elif path == "one step at a time":
+        assert sim.step(state, np.full((1, 3), -0.15)).contact.normal_reaction.max() > 0.0  # on the ball
+    assert made > 0 and freed == made, f"{made} of Numba's arrays made, {freed} freed"
+    assert not grown, f"{len(grown)} arrays gained references: {grown[:5]}"
