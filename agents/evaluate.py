@@ -154,7 +154,8 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
         act = residual_policy(act, ResidualAction(task, make_policy(residual["base"], task, 0), residual["rate"],
                                                   gust_hold=residual.get("gust_hold", False),
                                                   press_limit=residual.get("press_limit"),
-                                                  close_untouched=residual.get("close_untouched", False)))
+                                                  close_untouched=residual.get("close_untouched", False),
+                                                  press_taper=residual.get("press_taper")))
     return act
 
 

@@ -32,20 +32,25 @@ class ResidualAction:
     correction and its guards): with ``gust_hold``, it may not open a finger (a positive rate) while a gust may blow
     (:func:`~agents.scripted.gust_window`), so that it cannot hold more loosely than its controller through the
     gust; with ``press_limit`` (a fraction of the specimen's fragility limit, in (0, 1]), it may not close a finger
-    (a negative rate) that presses above that fraction of the limit; with ``close_untouched``, it may not open a
-    finger that does not touch the specimen (the observation's ``touching`` part), so that it cannot hold back a
-    finger the controller closes onto the specimen. The observation must hold the sensors' parts (finger forces,
-    touching, fragility limit, episode fraction) for any of them."""
+    (a negative rate) that presses above that fraction of the limit; with ``press_taper`` (a fraction in (0, 1] too),
+    its closing rate on a finger is scaled by the margin left to that fraction of the limit, 1 − force / (fraction ×
+    limit), clipped to [0, 1], so that it brakes as the force rises instead of at a threshold it may overshoot within
+    a control interval; with ``close_untouched``, it may not open a finger that does not touch the specimen (the
+    observation's ``touching`` part), so that it cannot hold back a finger the controller closes onto the specimen.
+    The observation must hold the sensors' parts (finger forces, touching, fragility limit, episode fraction) for
+    any of them."""
 
     def __init__(self, task: GraspTask, base: Callable[[np.ndarray], np.ndarray], rate: float,
-                 gust_hold: bool = False, press_limit: float | None = None, close_untouched: bool = False) -> None:
+                 gust_hold: bool = False, press_limit: float | None = None, close_untouched: bool = False,
+                 press_taper: float | None = None) -> None:
         check_range("ResidualAction", "rate", rate, "1/s", 0.0, task.max_curvature_rate, high_inclusive=True)
-        if press_limit is not None:
-            check_range("ResidualAction", "press_limit", press_limit, "(dimensionless)", 0.0, 1.0,
-                        high_inclusive=True)
+        for name, fraction in (("press_limit", press_limit), ("press_taper", press_taper)):
+            if fraction is not None:
+                check_range("ResidualAction", name, fraction, "(dimensionless)", 0.0, 1.0, high_inclusive=True)
         self.task, self.base, self.rate = task, base, rate
         self.gust_hold, self.press_limit, self.close_untouched = bool(gust_hold), press_limit, bool(close_untouched)
-        self._guards = self.gust_hold or press_limit is not None or self.close_untouched
+        self.press_taper = press_taper
+        self._guards = self.gust_hold or press_limit is not None or self.close_untouched or press_taper is not None
         if self._guards:
             layout = observation_slices(task)
             self._forces, self._limit = layout["finger_forces"], layout["fragile_force"]
@@ -68,6 +73,9 @@ class ResidualAction:
         if self.press_limit is not None:
             pressing = observation[..., self._forces] > self.press_limit * observation[..., self._limit]
             correction = np.where(pressing, np.maximum(correction, 0.0), correction)
+        if self.press_taper is not None:
+            margin = 1.0 - observation[..., self._forces] / (self.press_taper * observation[..., self._limit])
+            correction = np.where(correction < 0.0, correction * np.clip(margin, 0.0, 1.0), correction)
         if self.close_untouched:
             untouched = observation[..., self._touching] < 0.5
             correction = np.where(untouched, np.minimum(correction, 0.0), correction)
@@ -76,7 +84,7 @@ class ResidualAction:
     def settings(self) -> dict:
         """What a run's config.json records of the correction besides its controller (``residual``)."""
         return {"rate": self.rate, "gust_hold": self.gust_hold, "press_limit": self.press_limit,
-                "close_untouched": self.close_untouched}
+                "close_untouched": self.close_untouched, "press_taper": self.press_taper}
 
 
 class ResidualVecEnv(VecEnvWrapper):

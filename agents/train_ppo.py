@@ -5,6 +5,7 @@
         [--touching-closing-rate RATE] [--approach-slowing-gap M] [--final-pressure-weight 12]
         [--pressure-ramp 200000 400000] [--checkpoint-every 100000] [--residual-to reactive_tuned]
         [--residual-rate 0.1] [--residual-gust-hold] [--residual-press-limit FRACTION] [--residual-close-untouched]
+        [--residual-press-taper FRACTION]
         [--oversample-radius LOW HIGH SHARE] [--init-from POLICY] [--pressure-onset C]
 
 By default PPO trains in the env's default rod model (3-D; ``--model planar`` costs about a third per step) on the
@@ -25,9 +26,10 @@ With ``--residual-to CONTROLLER`` PPO learns a correction to a scripted controll
 its action adds up to ``--residual-rate`` [1/s] to the controller's rate, finger by finger, and the folder's
 config.json records the controller, so ``agents.evaluate --policy DIR`` runs the two together.
 ``--residual-gust-hold`` forbids the correction to open a finger while a gust may blow,
-``--residual-press-limit F`` to close one that presses above F times the specimen's fragility limit, and
-``--residual-close-untouched`` to open one that does not touch the specimen (:class:`agents.residual.ResidualAction`'s
-guards; config.json records them too).
+``--residual-press-limit F`` to close one that presses above F times the specimen's fragility limit,
+``--residual-press-taper F`` scales its closing by the margin left to F times the limit, and
+``--residual-close-untouched`` forbids it to open one that does not touch the specimen
+(:class:`agents.residual.ResidualAction`'s guards; config.json records them too).
 
 ``--oversample-radius LOW HIGH SHARE`` draws the specimen's radius of a share SHARE of the training episodes from
 [LOW, HIGH] m instead of the task's whole range (:class:`RadiusOversampling`): most failed grasps are of the smallest
@@ -356,6 +358,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--residual-press-limit", type=float, default=None, metavar="FRACTION",
                         help="the correction may not close a finger pressing above this fraction of the specimen's "
                              "fragility limit, in (0, 1] (with --residual-to; default: no limit)")
+    parser.add_argument("--residual-press-taper", type=float, default=None, metavar="FRACTION",
+                        help="the correction's closing rate on a finger is scaled by 1 - force / (FRACTION x the "
+                             "specimen's fragility limit), clipped to [0, 1]; FRACTION in (0, 1] (with --residual-to; "
+                             "default: no taper)")
     parser.add_argument("--residual-close-untouched", action="store_true",
                         help="the correction may not open a finger that does not touch the specimen (with "
                              "--residual-to)")
@@ -403,12 +409,13 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--residual-rate = {args.residual_rate} is outside (0, {task.max_curvature_rate:g}] 1/s (the "
                      f"fastest closing)")
     if not args.residual_to and (args.residual_gust_hold or args.residual_press_limit is not None
-                                 or args.residual_close_untouched):
-        parser.error("--residual-gust-hold, --residual-press-limit and --residual-close-untouched guard a "
-                     "correction: they need --residual-to")
-    if args.residual_press_limit is not None and not 0.0 < args.residual_press_limit <= 1.0:
-        parser.error(f"--residual-press-limit = {args.residual_press_limit} is outside (0, 1] (a fraction of the "
-                     f"fragility limit)")
+                                 or args.residual_press_taper is not None or args.residual_close_untouched):
+        parser.error("--residual-gust-hold, --residual-press-limit, --residual-press-taper and "
+                     "--residual-close-untouched guard a correction: they need --residual-to")
+    for option, fraction in (("--residual-press-limit", args.residual_press_limit),
+                             ("--residual-press-taper", args.residual_press_taper)):
+        if fraction is not None and not 0.0 < fraction <= 1.0:
+            parser.error(f"{option} = {fraction} is outside (0, 1] (a fraction of the fragility limit)")
     oversampling = None
     if args.oversample_radius is not None:
         low, high, share = args.oversample_radius
@@ -426,7 +433,7 @@ def main(argv: list[str] | None = None) -> dict:
     if args.residual_to:
         combine = ResidualAction(task, make_policy(args.residual_to, task, args.seed), args.residual_rate,
                                  gust_hold=args.residual_gust_hold, press_limit=args.residual_press_limit,
-                                 close_untouched=args.residual_close_untouched)
+                                 close_untouched=args.residual_close_untouched, press_taper=args.residual_press_taper)
         residual = {"base": args.residual_to, **combine.settings()}
     policy_settings = RESIDUAL_POLICY_SETTINGS if residual else POLICY_SETTINGS
     start_from = None

@@ -74,7 +74,7 @@ def test_a_residual_run_saves_its_controller_and_evaluates_as_the_two_together(t
                     "--validate-every", "0", "--checkpoint-every", "0"])
     config = json.loads((tmp_path / "config.json").read_text())
     assert config["residual"] == {"base": "reactive_tuned", "rate": 0.05, "gust_hold": False, "press_limit": None,
-                                  "close_untouched": False}
+                                  "close_untouched": False, "press_taper": None}
     assert config["policy"]["log_std_init"] == pytest.approx(np.log(0.2))
     policy = load_ppo(tmp_path)
     import pickle
@@ -134,6 +134,33 @@ def test_the_guards_stop_a_correction_opening_in_the_gust_window_and_closing_nea
     assert np.abs(unguarded[gusty & (residual > 0)]).max() > 0.01  # the guard is what removed it
     with pytest.raises(ValueError, match="ResidualAction.press_limit"):
         ResidualAction(SENSORS, controller, 0.1, press_limit=1.5)
+
+
+def test_the_press_taper_scales_closing_by_the_margin_to_the_limit_and_leaves_opening():
+    from soft_gripper_env.env import observation_slices
+
+    controller = ReactivePolicy(SENSORS, **TUNED_3D_GAINS)
+    layout = observation_slices(SENSORS)
+    forces = np.array([0.0, 0.45, 0.9, 1.2, 0.3, 1.0])  # against 0.5 x 2 N: margins 1, 0.55, 0.1, 0, 0.7, 0
+    obs = observations(1)[-len(forces):].copy()  # the last steps: fingers touching
+    obs[:, layout["fragile_force"]] = 2.0
+    obs[:, layout["finger_forces"]] = forces[:, None]
+    residual = np.tile([-1.0, -0.5, 0.8], (len(obs), 1))
+    free = ResidualAction(SENSORS, controller, 0.1)
+    tapered = ResidualAction(SENSORS, controller, 0.1, press_taper=0.5)
+    assert tapered.settings()["press_taper"] == 0.5
+
+    def correction(combine):
+        return SENSORS.curvature_rate(combine(obs, residual).astype(float)) \
+            - SENSORS.curvature_rate(controller(obs).astype(float))
+
+    margin = np.clip(1.0 - forces / 1.0, 0.0, 1.0)[:, None]
+    unguarded, kept = correction(free), correction(tapered)
+    assert np.abs(unguarded[:, :2]).min() > 0.01  # the correction closes those two fingers unguarded
+    np.testing.assert_allclose(kept[:, :2], unguarded[:, :2] * margin, atol=1e-6)  # closing braked by the margin
+    np.testing.assert_allclose(kept[:, 2], unguarded[:, 2], atol=1e-6)  # opening as it was
+    with pytest.raises(ValueError, match="ResidualAction.press_taper"):
+        ResidualAction(SENSORS, controller, 0.1, press_taper=0.0)
 
 
 def test_the_untouched_guard_stops_a_correction_holding_back_a_finger_that_does_not_touch():
