@@ -13,7 +13,7 @@ from numba.core import event
 
 PACKAGE = __name__.split(".")[0]
 NOTICE = (f"{PACKAGE}: compiling the physics kernels for this machine, once (the default env's first step takes "
-          "one to one and a half minutes on 2 cores); later runs load them from Numba's cache in seconds")
+          "about a minute on 2 cores); later runs load them from Numba's cache in seconds")
 
 
 class _FirstCompile(event.Listener):
