@@ -1,8 +1,8 @@
 """Evaluate a policy on SoftGripperUnderwater-v0 over fixed seeds: success rate, mean return, peak finger force,
 and how the episodes ended.
 
-    python -m agents.evaluate --policy random|ramp|reactive|reactive_tuned|pretrained|PATH [--episodes 200]
-        [--seed 1000] [--json FILE] [--model planar|3d]
+    python -m agents.evaluate --policy random|ramp|reactive|reactive_tuned|reactive_graded|pretrained|PATH
+        [--episodes 200] [--seed 1000] [--json FILE] [--model planar|3d]
 
 Episodes use seeds seed, seed + 1, ...: every policy sees the same specimens, currents and gusts, so their numbers
 compare directly. PATH is a folder that ``agents.train_ppo`` wrote (its model and VecNormalize statistics);
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from agents.scripted import TUNED_3D_GAINS, RampPolicy, RandomPolicy, ReactivePolicy
+from agents.scripted import GRADED_3D_GAINS, TUNED_3D_GAINS, RampPolicy, RandomPolicy, ReactivePolicy
 from soft_gripper_env.env import SoftGripperUnderwaterVectorEnv, observation_bounds, observation_slices
 from soft_gripper_env.grasp_task import GraspTask, RewardWeights
 
@@ -220,7 +220,7 @@ def ppo_policy(model, normalize, name: str = "the policy") -> Callable[[np.ndarr
     return act
 
 
-SCRIPTED = ("random", "ramp", "reactive", "reactive_tuned")
+SCRIPTED = ("random", "ramp", "reactive", "reactive_tuned", "reactive_graded")
 """The scripted policies ``--policy`` names (no config.json, no reflexes of their own)."""
 
 
@@ -231,7 +231,7 @@ def policy_folder(name: str) -> Path:
 
 def make_policy(name: str, task: GraspTask, seed: int) -> Callable[[np.ndarray], np.ndarray]:
     """``random`` (seeded by ``seed``), ``ramp``, ``reactive``, ``reactive_tuned`` (:data:`TUNED_3D_GAINS`),
-    ``pretrained`` or the path of a trained policy."""
+    ``reactive_graded`` (:data:`GRADED_3D_GAINS`), ``pretrained`` or the path of a trained policy."""
     if name == "random":
         return RandomPolicy(task, seed)
     if name == "ramp":
@@ -240,6 +240,8 @@ def make_policy(name: str, task: GraspTask, seed: int) -> Callable[[np.ndarray],
         return ReactivePolicy(task)
     if name == "reactive_tuned":
         return ReactivePolicy(task, **TUNED_3D_GAINS)
+    if name == "reactive_graded":
+        return ReactivePolicy(task, **GRADED_3D_GAINS)
     return load_ppo(policy_folder(name))
 
 
@@ -298,8 +300,8 @@ def task_from_arguments(parser: argparse.ArgumentParser, **settings) -> GraspTas
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--policy", required=True,
-                        help="random, ramp, reactive, reactive_tuned (its gains tuned in 3-D), pretrained, or a "
-                             "train_ppo folder")
+                        help="random, ramp, reactive, reactive_tuned (its gains tuned in 3-D), reactive_graded (with "
+                             "a graded touch, tuned in 3-D), pretrained, or a train_ppo folder")
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--seed", type=int, default=1000, help="the first episode's seed")
     parser.add_argument("--json", type=Path, help="write the results here")

@@ -20,7 +20,7 @@ from soft_gripper_env.env import observation_slices
 from soft_gripper_env.grasp_task import GraspTask
 from soft_gripper_env.physics import check_range
 
-RESIDUAL_BASES = ("reactive", "reactive_tuned")
+RESIDUAL_BASES = ("reactive", "reactive_tuned", "reactive_graded")
 """The controllers a residual policy may correct (``agents.evaluate``'s names)."""
 
 

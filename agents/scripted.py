@@ -62,6 +62,13 @@ PPO policies' closing reflexes, on tuning seeds 5000–5199 only (16 settings of
 1.96 N with the defaults. ``agents.evaluate --policy reactive_tuned`` runs it: the fair baseline for a policy
 trained in 3-D."""
 
+GRADED_3D_GAINS = {"grip": 0.2, "gust_grip": 0.2, "gain": 0.1, "touch_force": 0.1}
+"""The reactive controller with a graded touch (``touch_force`` [N]), its settings chosen in the default 3-D model
+(Δt 2.5 ms) with the PPO policies' closing reflexes, on tuning seeds 5000–5199 only (seven settings of
+``touch_force``, ``grip`` and ``gust_grip``; docs/notes/ppo_experiments.md), as the most successful whose mean peak
+force is below the on–off controller's (:data:`TUNED_3D_GAINS`): success 0.935 at 1.59 N there, against 0.885 at
+1.66 N. ``agents.evaluate --policy reactive_graded`` runs it: the strongest scripted baseline in 3-D."""
+
 
 def gust_window(task: GraspTask) -> tuple[float, float]:
     """The episode fractions in which a gust may blow (dimensionless): from a little (0.05) before the task's
@@ -89,6 +96,13 @@ class ReactivePolicy:
       times, read from the episode fraction). Its curvature rate is ``gain`` × ``max_curvature_rate`` ×
       (F − target)/target [1/s], at most ``press_rate`` either way: a grip's force follows κ̄ steeply.
     - A finger that loses its touch closes again.
+    - **Touch.** With ``touch_force`` None, a finger touches when the observation's touch flag is set (its
+      sustained force at least the task's ``contact_force``), and the controller switches between the three
+      behaviours above. With a ``touch_force`` [N], a finger's touch is a weight that rises linearly with its
+      observed force (the mean over the last control interval) from 0 at no force to 1 at ``touch_force``: the
+      approach is scaled by one minus the weight, the wait and the grip by the weight, and "every finger touches"
+      is the smallest weight, so the action is continuous in the observation (no interval of full approach or
+      none decided by a threshold).
 
     The policy keeps no state: it acts on one observation (obs_dim,) or a batch (B, obs_dim), as from a vector of
     envs.
@@ -96,7 +110,7 @@ class ReactivePolicy:
 
     def __init__(self, task: GraspTask | None = None, grip: float = 0.3, gust_grip: float = 0.4, gain: float = 0.2,
                  press_rate: float = 0.02, approach_rate: float = APPROACH_RATE, slow_gap: float = 0.01,
-                 slowest: float = 0.2) -> None:
+                 slowest: float = 0.2, touch_force: float | None = None) -> None:
         self.task = task or GraspTask()
         check_range("ReactivePolicy", "approach_rate", approach_rate, "1/s", -self.task.max_curvature_rate, 0.0,
                     low_inclusive=True)
@@ -107,6 +121,9 @@ class ReactivePolicy:
         check_range("ReactivePolicy", "slow_gap", slow_gap, "m", 0.0, 1.0, low_inclusive=True)
         check_range("ReactivePolicy", "slowest", slowest, "(dimensionless)", 0.0, 1.0, high_inclusive=True)
         check_range("ReactivePolicy", "gust_grip", gust_grip, "(dimensionless)", 0.0, 1.0)
+        if touch_force is not None:
+            check_range("ReactivePolicy", "touch_force", touch_force, "N", 0.0, 100.0, high_inclusive=True)
+        self.touch_force = touch_force
         self.grip, self.gust_grip, self.gain, self.slow_gap, self.slowest = grip, gust_grip, gain, slow_gap, slowest
         self._gust_window = gust_window(self.task)
         self._press, self._approach = press_rate, approach_rate
@@ -117,15 +134,19 @@ class ReactivePolicy:
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         observation = np.asarray(observation)
         batch = observation.reshape(-1, observation.shape[-1]).astype(float)
-        force, touching = batch[:, self._forces], batch[:, self._touching] > 0.5
-        fraction = batch[:, self._fraction]
+        force, fraction = batch[:, self._forces], batch[:, self._fraction]
+        if self.touch_force is None:
+            touch = (batch[:, self._touching] > 0.5).astype(float)
+        else:
+            touch = np.clip(force / self.touch_force, 0.0, 1.0)
         gusty = gust_may_blow(self._gust_window, fraction)
         target = np.maximum(np.where(gusty, self.gust_grip, self.grip) * batch[:, self._limit], 1e-9)  # [N]
         regulate = np.clip(-self.gain * self.task.max_curvature_rate * (target - force) / target, -self._press,
                            self._press)  # [1/s]
         waiting = np.maximum(regulate, 0.0)  # a touching finger only backs off while the others close
-        caged = touching.all(axis=1, keepdims=True)
+        caged = touch.min(axis=1, keepdims=True)
         near = np.clip(batch[:, self._gaps] / self.slow_gap, self.slowest, 1.0) if self.slow_gap > 0 else 1.0
-        rate = np.where(~touching, self._approach * near, np.where(caged, regulate, waiting))
+        # with a 0/1 touch this picks one of the three rates exactly, as a switch would
+        rate = (1.0 - touch) * self._approach * near + touch * (caged * regulate + (1.0 - caged) * waiting)
         shape = observation.shape[:-1] + (self.task.gripper.n_fingers,)
         return self.task.action_for_rate(rate).astype(np.float32).reshape(shape)

@@ -122,7 +122,7 @@ def test_ppo_trains_saves_together_and_is_evaluated_against_the_baselines(tmp_pa
     results = train_ppo.main(["--out", str(tmp_path), "--timesteps", "256", "--num-envs", "4", "--model", "planar",
                               "--eval-episodes", "1", "--validate-every", "128", "--validation-episodes", "2"])
     saved = json.loads((tmp_path / "evaluation.json").read_text())
-    for name in ("ppo", "ramp", "reactive"):
+    for name in ("ppo", "ramp", "reactive", "reactive_graded"):
         assert 0.0 <= saved[name]["success_rate"] <= 1.0 and np.isfinite(saved[name]["mean_return"])
     assert results["ppo"] == saved["ppo"]
     config = json.loads((tmp_path / "config.json").read_text())
@@ -544,7 +544,8 @@ def test_scripts_reject_bad_arguments(tmp_path):
                      "--residual-rate", "0.4")
     assert out.returncode == 2 and "--residual-rate = 0.4 is outside (0, 0.3] 1/s" in out.stderr, out.stderr
     out = run_script("-m", "agents.train_ppo", "--out", str(tmp_path / "residual"), "--residual-to", "ramp")
-    assert out.returncode == 2 and "invalid choice: 'ramp' (choose from 'reactive', 'reactive_tuned')" in out.stderr
+    assert out.returncode == 2
+    assert "invalid choice: 'ramp' (choose from 'reactive', 'reactive_tuned', 'reactive_graded')" in out.stderr
     assert not (tmp_path / "residual").exists()
 
 
@@ -635,7 +636,18 @@ def test_the_reactive_controller_tuned_in_3d_is_a_named_policy():
     assert out.returncode == 0, out.stderr
 
 
+def test_the_reactive_controller_with_a_graded_touch_is_a_named_policy():
+    from agents.evaluate import make_policy
+    from agents.scripted import GRADED_3D_GAINS
+
+    policy = make_policy("reactive_graded", GraspTask(), 0)
+    assert isinstance(policy, ReactivePolicy)
+    assert {name: getattr(policy, name) for name in GRADED_3D_GAINS} == GRADED_3D_GAINS
+    assert policy.touch_force is not None and ReactivePolicy().touch_force is None
+
+
 def test_evaluate_refuses_an_unknown_policy_naming_the_ones_it_knows():
     out = run_script("-m", "agents.evaluate", "--policy", "no_such_policy", "--episodes", "1")
     assert out.returncode == 2
-    assert "'no_such_policy' is not random, ramp, reactive, reactive_tuned, pretrained or a folder" in out.stderr
+    assert ("'no_such_policy' is not random, ramp, reactive, reactive_tuned, reactive_graded, pretrained or a "
+            "folder") in out.stderr

@@ -485,6 +485,38 @@ def test_reactive_policy_approaches_cages_and_regulates_the_force():
         ReactivePolicy(task, approach_rate=0.0)
 
 
+def test_a_graded_touch_makes_the_reactive_controller_continuous_in_the_force():
+    """With ``touch_force`` the controller blends approach, wait and grip by a touch weight F / touch_force: at 0 N
+    and at or above touch_force it acts as the on-off controller does at those forces, between them its rate
+    moves by no more than the force's change allows (no jump at a threshold), and the touch flag is not read."""
+    task = GraspTask()
+    gains = {"grip": 0.3, "gust_grip": 0.4, "gain": 0.2, "press_rate": 0.02, "slow_gap": 0.02, "slowest": 0.2}
+    graded, switched = ReactivePolicy(task, touch_force=0.05, **gains), ReactivePolicy(task, **gains)
+    layout = observation_slices(task)
+
+    def rates(policy, forces, touching):
+        obs = np.zeros((len(forces), observation_bounds(task)[0].size), dtype=np.float32)
+        obs[:, layout["finger_forces"]] = forces
+        obs[:, layout["touching"]] = touching
+        obs[:, layout["finger_gaps"]] = 0.05
+        obs[:, layout["fragile_force"]] = 2.0
+        obs[:, layout["episode_fraction"]] = 0.1
+        return task.curvature_rate(policy(obs).astype(float))
+
+    ends = np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.55, 0.6, 0.9], [1.2, 0.0, 0.0]])
+    np.testing.assert_allclose(rates(graded, ends, 0.0), rates(switched, ends, ends >= 0.05), rtol=1e-6, atol=1e-9)
+    # the middle finger's force swept from 0 to 0.1 N with the others pressing: one finger approaches, then all grip
+    sweep = np.linspace(0.0, 0.1, 1001)
+    forces = np.stack([np.full_like(sweep, 0.5), sweep, np.full_like(sweep, 0.7)], axis=1)
+    swept = rates(graded, forces, 1.0)
+    assert swept[0, 1] == pytest.approx(APPROACH_RATE, rel=1e-5) and np.all(swept[-1] >= -0.02 - 1e-6)
+    steps = np.abs(np.diff(swept, axis=0)).max()
+    assert steps < 0.01 * abs(APPROACH_RATE), f"the rate jumps by {steps} 1/s for a 0.1 mN change of force"
+    assert np.abs(np.diff(rates(switched, forces, forces >= 0.05), axis=0)).max() > 0.5 * abs(APPROACH_RATE)
+    with pytest.raises(ValueError, match=r"ReactivePolicy\.touch_force = 0\.0 N is outside"):
+        ReactivePolicy(task, touch_force=0.0)
+
+
 def test_the_cubic_action_map_and_its_inverse():
     """An action a sets the rate max_curvature_rate·sign(a)·|a|³; action_for_rate inverts it (and clips)."""
     task = GraspTask()
