@@ -1,9 +1,9 @@
 """Grasp outcomes against the physics step Δt: whether each rod model's outcomes have converged, against the chaos
 floor that no step size removes.
 
-    python -m benchmarks.outcome_convergence [--models 3d,planar] [--controllers reactive,ramp,pretrained]
-        [--dts 3d=0.01,...;planar=...] [--tolerance-floor] [--episodes 400] [--seed 3000000] [--workers 2]
-        [--stop-after MINUTES]
+    python -m benchmarks.outcome_convergence [--models 3d,planar]
+        [--controllers reactive,ramp,pretrained[,reactive_graded]] [--dts 3d=0.01,...;planar=...]
+        [--tolerance-floor] [--episodes 400] [--seed 3000000] [--workers 2] [--stop-after MINUTES]
         [--runs out/outcome_convergence_runs] [--json out/outcome_convergence.json]
         [--plot out/outcome_convergence.png] [--time]
 
@@ -50,7 +50,9 @@ from agents.compare import wilson_interval
 from ._timing import save_plot
 
 MODELS = ("3d", "planar")
-CONTROLLERS = ("reactive", "ramp", "pretrained")
+CONTROLLERS = ("reactive", "ramp", "pretrained", "reactive_graded")
+"""The controllers a study may run (``agents.evaluate``'s names); the first three by default."""
+DEFAULT_CONTROLLERS = CONTROLLERS[:3]
 DEFAULT_DTS = {"3d": (0.01, 0.005, 0.0025, 0.00125, 0.000625, 0.0003125),
                "planar": (0.01, 0.005, 0.0025, 0.00125, 0.000625)}
 """Each model's physics steps [s], halved from 10 ms down to the finest, which is the reference."""
@@ -528,7 +530,7 @@ def plot(summary: dict, path: Path) -> None:
 
     models = [m for m in summary["models"] if summary["models"][m]]
     fig, axes = plt.subplots(len(models), 3, figsize=(15, 4.2 * len(models)), squeeze=False)
-    colours = dict(zip(CONTROLLERS, ("tab:blue", "tab:orange", "tab:green"), strict=True))
+    colours = dict(zip(CONTROLLERS, ("tab:blue", "tab:orange", "tab:green", "tab:red"), strict=True))
     for row, model in enumerate(models):
         success, agree, gap = axes[row]
         for controller, study in summary["models"][model].items():
@@ -624,8 +626,9 @@ def study_models(parser: argparse.ArgumentParser, args: argparse.Namespace) -> l
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_study_options(parser, "outcome_convergence", 400, FIRST_SEED)
-    parser.add_argument("--controllers", default=",".join(CONTROLLERS),
-                        help="comma-separated, of reactive, ramp, pretrained (default all three)")
+    parser.add_argument("--controllers", default=",".join(DEFAULT_CONTROLLERS),
+                        help="comma-separated, of " + ", ".join(CONTROLLERS) + " (default: "
+                             + ", ".join(DEFAULT_CONTROLLERS) + ")")
     parser.add_argument("--dts", help="steps [s] per model, e.g. '3d=0.01,0.005;planar=0.01,0.005' "
                                       "(default: halved from 0.01 to 0.0003125 s in 3-D, to 0.000625 s planar)")
     parser.add_argument("--change", action="append", default=[], choices=[c for c in CHANGES if c != "perturbed"],
