@@ -75,7 +75,6 @@ from agents.evaluate import (
 from agents.learning_curves import load_run, plot_learning_curves
 from agents.residual import RESIDUAL_BASES, ResidualAction, ResidualVecEnv, residual_policy
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
-from agents.scripted import GRADED_3D_GAINS, RampPolicy, ReactivePolicy
 from soft_gripper_env.grasp_task import MODELS, GraspTask, RewardWeights
 
 HELD_OUT_SEED = 1_000_000
@@ -490,9 +489,9 @@ def main(argv: list[str] | None = None) -> dict:
 
     results = {"timesteps": args.timesteps, "seed": args.seed, "training_wall_s": wall}
     if args.eval_episodes:
-        for name, policy in (("ppo", load_ppo(args.out)), ("ramp", RampPolicy(task)),
-                             ("reactive", ReactivePolicy(task)),
-                             ("reactive_graded", ReactivePolicy(task, **GRADED_3D_GAINS))):
+        policies = {"ppo": load_ppo(args.out)} | {name: make_policy(name, task, args.seed)
+                                                  for name in ("ramp", "reactive", "reactive_graded")}
+        for name, policy in policies.items():
             result = evaluate(policy, args.eval_episodes, HELD_OUT_SEED, **settings)
             results[name] = {key: result[key] for key in ("success_rate", "mean_return", "mean_peak_contact_force_N",
                                                           "endings")}
