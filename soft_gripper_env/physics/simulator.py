@@ -202,7 +202,8 @@ class Simulator:
         contact = scene.contact
         self._finger_contact = FingerContact.of(disc, contact.finger_contact_stiffness, contact.finger_friction,
                                                 first_free_node=0 if scene.gripper.finger.clamp == "free" else 2)
-        self._rods = RodArrays.of(disc, self._finger_contact)  # 3-D: the frames are the state's (_rod_arrays)
+        # 3-D: the frames are the state's (_rod_arrays)
+        self._rods = RodArrays.of(disc, self._finger_contact, self._integrator.numerical_retardation)
         self._plain_rods, self._plain_terms = plain(self._rods), plain(self._force_terms)
         self._no_acceleration = np.empty((0, 0, 0))
         directions = disc.finger_directions

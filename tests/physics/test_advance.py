@@ -137,9 +137,9 @@ def test_a_batch_of_one_halves_its_steps_in_the_compiled_call(model, monkeypatch
     taken there unresolved."""
     scene = task_scenes(model, 1, seed=5)[0]
     if model == "planar":
-        scene, rate, start = replace(scene, newton=NewtonSettings(max_iterations=4)), -0.3, -0.1
+        scene, rate, start = replace(scene, newton=NewtonSettings(max_iterations=4)), -0.5, -0.1
     else:
-        scene = replace(scene, newton=NewtonSettings(max_iterations=12),
+        scene = replace(scene, newton=NewtonSettings(max_iterations=16),
                         contact=replace(scene.contact, max_corrector_iterations=0))
         rate, start = -0.3, -0.3
     rate = np.array([[rate, 0.8 * rate, rate]])

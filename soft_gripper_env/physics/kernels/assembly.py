@@ -49,6 +49,10 @@ class RodArrays(NamedTuple):
     """Rest length attributed to each node [m], (N,)."""
     retardation_time: float
     """The material's Kelvin–Voigt retardation time τ [s]."""
+    integrator_retardation: float
+    """The damping the integrator's step adds of its own, as a Kelvin–Voigt retardation time in units of the step
+    (dimensionless): 1 for backward Euler, 0 for the midpoint rule
+    (:attr:`~..solvers.integrators.BackwardEuler.numerical_retardation`)."""
     fingers: FingerContact
     """The constants of contact between a gripper's fingers (:class:`~.finger_contact.FingerContact`)."""
     tangent: np.ndarray
@@ -59,12 +63,12 @@ class RodArrays(NamedTuple):
     """Start-of-step reference twist at every node [rad], (R, N); (0, 0) in the planar model."""
 
     @classmethod
-    def of(cls, disc: Discretization, fingers: FingerContact) -> RodArrays:
-        """The arrays of ``disc`` with the contact between its fingers, without frames (a state's are put in with
-        ``_replace``)."""
+    def of(cls, disc: Discretization, fingers: FingerContact, integrator_retardation: float) -> RodArrays:
+        """The arrays of ``disc`` with the contact between its fingers and the integrator's own damping, without
+        frames (a state's are put in with ``_replace``)."""
         return cls(disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness, disc.twist_stiffness,
-                   disc.voronoi_length, disc.retardation_time, fingers, np.empty((0, 0, 3)), np.empty((0, 0, 3)),
-                   np.empty((0, 0)))
+                   disc.voronoi_length, disc.retardation_time, float(integrator_retardation), fingers,
+                   np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))
 
 
 N_DESIGN_FIELDS = RodArrays._fields.index("tangent")
@@ -77,8 +81,8 @@ FINGERS_FIELD = RodArrays._fields.index("fingers")
 def named_rods(rods):
     """:class:`RodArrays` from its fields as plain tuples (:func:`~..solvers.newton.plain`), named again, the
     finger contact's too."""
-    return RodArrays(rods[0], rods[1], rods[2], rods[3], rods[4], rods[5], FingerContact(*rods[6]), rods[7], rods[8],
-                     rods[9])
+    return RodArrays(rods[0], rods[1], rods[2], rods[3], rods[4], rods[5], rods[6], FingerContact(*rods[7]), rods[8],
+                     rods[9], rods[10])
 
 
 class StepInputs(NamedTuple):
@@ -142,11 +146,17 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, strained, veloci
     Material damping (Kelvin–Voigt, stress E·(ε + τ·ε̇)) adds −τ·K·v to the elastic force f(q), K = −∂f/∂q. With the
     step's v = (q − q_old)/Δt that is, to first order in τ·v, the elastic force at q* = q + (τ/Δt)·(q − q_old): one
     evaluation of the same elastic kernel, whose Jacobian is (1 + τ/Δt)·∂f/∂q(q*). A mode of angular frequency ω
-    gets the damping ratio τ·ω/2, and the actuation's κ̄ is left out of it (it damps the material's strain rate)."""
+    gets the damping ratio τ·ω/2, and the actuation's κ̄ is left out of it (it damps the material's strain rate).
+
+    A backward-Euler step damps a mode with ω·Δt ≪ 1 as a Kelvin–Voigt material of τ = Δt would (its modified
+    equation adds Δt·ω²/2 to the decay rate), so with the material's τ at full strength the damping grows with the
+    step: a first-order error that kept a grasp's peak force from converging in the step. The step therefore
+    applies τ − ``integrator_retardation``·Δt (never below 0), and the sum of the two is the material's τ to first
+    order; a step longer than τ damps more than the material, by its own part alone."""
     force[:] = 0.0
     band[:] = 0.0
     stride = q.shape[2]
-    viscous = rods.retardation_time / step.dt
+    viscous = max(rods.retardation_time - rods.integrator_retardation * step.dt, 0.0) / step.dt
     at = q[r]
     if viscous != 0.0:
         at = strained

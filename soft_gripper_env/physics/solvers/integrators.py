@@ -52,6 +52,9 @@ class BackwardEuler:
     """Backward (implicit) Euler: one implicit step of Δt."""
 
     order = 1
+    numerical_retardation = 1.0
+    """Its step damps a mode of ω·Δt ≪ 1 as a Kelvin–Voigt material of retardation time Δt would, in units of Δt
+    (the material's own damping is applied less this; :func:`~..kernels.assembly.assemble_rod`)."""
 
     def advance(self, stepper: ImplicitStepper, state: RodState, natural_curvature: np.ndarray,
                 dt: float) -> StepResult:
@@ -62,6 +65,8 @@ class ImplicitMidpoint:
     """The implicit midpoint rule: a backward-Euler half step to the midpoint, then extrapolation to the end."""
 
     order = 2
+    numerical_retardation = 0.0
+    """It adds no damping to a linear oscillator."""
 
     def advance(self, stepper: ImplicitStepper, state: RodState, natural_curvature: np.ndarray,
                 dt: float) -> StepResult:
@@ -70,6 +75,9 @@ class ImplicitMidpoint:
 
 class MidpointComposition:
     """A symmetric composition of implicit-midpoint steps of ``fractions``·Δt (summing to 1), of order ``order``."""
+
+    numerical_retardation = 0.0
+    """Composed of midpoint steps, it adds no damping to a linear oscillator either."""
 
     def __init__(self, fractions: tuple[float, ...], order: int) -> None:
         self.fractions, self.order = fractions, order
