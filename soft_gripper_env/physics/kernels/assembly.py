@@ -49,7 +49,7 @@ class RodArrays(NamedTuple):
     """Rest length attributed to each node [m], (N,)."""
     retardation_time: float
     """The material's Kelvin–Voigt retardation time τ [s]."""
-    integrator_retardation: float
+    numerical_retardation: float
     """The damping the integrator's step adds of its own, as a Kelvin–Voigt retardation time in units of the step
     (dimensionless): 1 for backward Euler, 0 for the midpoint rule
     (:attr:`~..solvers.integrators.BackwardEuler.numerical_retardation`)."""
@@ -63,11 +63,11 @@ class RodArrays(NamedTuple):
     """Start-of-step reference twist at every node [rad], (R, N); (0, 0) in the planar model."""
 
     @classmethod
-    def of(cls, disc: Discretization, fingers: FingerContact, integrator_retardation: float) -> RodArrays:
+    def of(cls, disc: Discretization, fingers: FingerContact, numerical_retardation: float) -> RodArrays:
         """The arrays of ``disc`` with the contact between its fingers and the integrator's own damping, without
         frames (a state's are put in with ``_replace``)."""
         return cls(disc.rest_edge_length, disc.stretch_stiffness, disc.bend_stiffness, disc.twist_stiffness,
-                   disc.voronoi_length, disc.retardation_time, float(integrator_retardation), fingers,
+                   disc.voronoi_length, disc.retardation_time, float(numerical_retardation), fingers,
                    np.empty((0, 0, 3)), np.empty((0, 0, 3)), np.empty((0, 0)))
 
 
@@ -151,12 +151,12 @@ def assemble_rod(r, q, step, rods, terms, hessian, force, band, strained, veloci
     A backward-Euler step damps a mode with ω·Δt ≪ 1 as a Kelvin–Voigt material of τ = Δt would (its modified
     equation adds Δt·ω²/2 to the decay rate), so with the material's τ at full strength the damping grows with the
     step: a first-order error that kept a grasp's peak force from converging in the step. The step therefore
-    applies τ − ``integrator_retardation``·Δt (never below 0), and the sum of the two is the material's τ to first
+    applies τ − ``numerical_retardation``·Δt (never below 0), and the sum of the two is the material's τ to first
     order; a step longer than τ damps more than the material, by its own part alone."""
     force[:] = 0.0
     band[:] = 0.0
     stride = q.shape[2]
-    viscous = max(rods.retardation_time - rods.integrator_retardation * step.dt, 0.0) / step.dt
+    viscous = max(rods.retardation_time - rods.numerical_retardation * step.dt, 0.0) / step.dt
     at = q[r]
     if viscous != 0.0:
         at = strained
