@@ -56,18 +56,18 @@ class RandomPolicy:
 
 
 TUNED_3D_GAINS = {"grip": 0.3, "gust_grip": 0.3, "gain": 0.1}
-"""The reactive controller's gains tuned again in the default 3-D model (Δt 2.5 ms, four friction passes) with the
-PPO policies' closing reflexes, on tuning seeds 5000–5199 only (16 settings of ``grip``, ``gust_grip`` and
-``gain``; docs/notes/ppo_experiments.md): success 0.885 at a mean peak force of 1.66 N there, against 0.835 at
-1.96 N with the defaults. ``agents.evaluate --policy reactive_tuned`` runs it: the fair baseline for a policy
-trained in 3-D."""
+"""The reactive controller's gains tuned again in the 3-D model at Δt 2.5 ms (the default step then) with four
+friction passes and the PPO policies' closing reflexes, on tuning seeds 5000–5199 only (16 settings of ``grip``,
+``gust_grip`` and ``gain``; docs/notes/ppo_experiments.md): success 0.885 at a mean peak force of 1.66 N there,
+against 0.835 at 1.96 N with the defaults. ``agents.evaluate --policy reactive_tuned`` runs it: the fair baseline for
+a policy trained in 3-D."""
 
 GRADED_3D_GAINS = {"grip": 0.2, "gust_grip": 0.2, "gain": 0.1, "touch_force": 0.1}
-"""The reactive controller with a graded touch (``touch_force`` [N]), its settings chosen in the default 3-D model
-(Δt 2.5 ms) with the PPO policies' closing reflexes, on tuning seeds 5000–5199 only (seven settings of
-``touch_force``, ``grip`` and ``gust_grip``; docs/notes/ppo_experiments.md), as the most successful whose mean peak
-force is below the on–off controller's (:data:`TUNED_3D_GAINS`): success 0.935 at 1.59 N there, against 0.885 at
-1.66 N. ``agents.evaluate --policy reactive_graded`` runs it: the strongest scripted baseline in 3-D."""
+"""The reactive controller with a graded touch (``touch_force`` [N]), its settings chosen in the 3-D model at Δt
+2.5 ms (the default step then) with the PPO policies' closing reflexes, on tuning seeds 5000–5199 only (seven
+settings of ``touch_force``, ``grip`` and ``gust_grip``; docs/notes/ppo_experiments.md), as the most successful whose
+mean peak force is below the on–off controller's (:data:`TUNED_3D_GAINS`): success 0.935 at 1.59 N there, against
+0.885 at 1.66 N. ``agents.evaluate --policy reactive_graded`` runs it: the strongest scripted baseline in 3-D."""
 
 
 def gust_window(task: GraspTask) -> tuple[float, float]:

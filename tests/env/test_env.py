@@ -334,19 +334,19 @@ def test_the_newton_setting_reaches_the_solver():
 
 
 def test_each_rod_model_takes_its_own_default_step_and_friction_passes():
-    """physics_dt and friction_passes default to the model's (MODEL_DEFAULTS: 2.5 ms with four passes in 3-D,
-    5 ms with two passes planar); given ones are kept, None included."""
-    assert MODEL_DEFAULTS == {"3d": {"physics_dt": 0.0025, "friction_passes": 4},
-                              "planar": {"physics_dt": 0.005, "friction_passes": 2}}
+    """physics_dt and friction_passes default to the model's (MODEL_DEFAULTS: 1.25 ms in both, with four passes
+    in 3-D and two planar); given ones are kept, None included."""
+    assert MODEL_DEFAULTS == {"3d": {"physics_dt": 0.00125, "friction_passes": 4},
+                              "planar": {"physics_dt": 0.00125, "friction_passes": 2}}
     three_d, planar = GraspTask(), GraspTask(model="planar")
-    assert (three_d.physics_dt, three_d.friction_passes, three_d.substeps) == (0.0025, 4, 20)
-    assert (planar.physics_dt, planar.friction_passes, planar.substeps) == (0.005, 2, 10)
+    assert (three_d.physics_dt, three_d.friction_passes, three_d.substeps) == (0.00125, 4, 40)
+    assert (planar.physics_dt, planar.friction_passes, planar.substeps) == (0.00125, 2, 40)
     given = GraspTask(model="planar", physics_dt=0.01, friction_passes=None)
     assert (given.physics_dt, given.friction_passes) == (0.01, None)
     assert GraspTask(friction_passes=1).friction_passes == 1
     env = SoftGripperUnderwaterEnv()
     env.reset(seed=0)
-    assert env.task.physics_dt == 0.0025
+    assert env.task.physics_dt == 0.00125
     assert env.unwrapped._batch.sim.scene.contact.friction_passes == 4
 
 

@@ -14,10 +14,15 @@ STATE_FIELDS = ("q", "velocity", "acceleration", "tangent", "director", "referen
                 "body_position", "body_velocity", "body_orientation", "body_angular_velocity")
 
 
-def task_scenes(model, batch_size, seed=3):
+COARSE_STEP = {"planar": 0.005, "3d": 0.0025}
+"""Physics steps [s] four and two times the task's default, at which a fast-closing gripper's step with Newton's
+iterations capped fails and is halved: the hard cases of the halving tests."""
+
+
+def task_scenes(model, batch_size, seed=3, physics_dt=None):
     """The grasp task's scenes (free spheres in a current with a gust, fingers of finite thickness touching each
-    other, friction passes capped), one per gripper."""
-    task = GraspTask(model=model)
+    other, friction passes capped), one per gripper; at the task's default step unless ``physics_dt`` [s] is given."""
+    task = GraspTask(model=model) if physics_dt is None else GraspTask(model=model, physics_dt=physics_dt)
     rng = np.random.default_rng(seed)
     return [task_episode(task, rng, {}).scene for _ in range(batch_size)]
 
@@ -135,7 +140,7 @@ def test_a_batch_of_one_halves_its_steps_in_the_compiled_call(model, monkeypatch
     the same gripper gets from the host's halving when it shares a batch. Planar: Newton capped at four
     iterations; 3-D: no corrector re-solves, so that a step with a new hold is halved down to the deepest level and
     taken there unresolved."""
-    scene = task_scenes(model, 1, seed=5)[0]
+    scene = task_scenes(model, 1, seed=5, physics_dt=COARSE_STEP[model])[0]
     if model == "planar":
         scene, rate, start = replace(scene, newton=NewtonSettings(max_iterations=4)), -0.5, -0.1
     else:
@@ -166,7 +171,8 @@ def test_a_batch_of_one_whose_half_step_fails_keeps_the_state_before_the_step(mo
     """With one halving allowed and three Newton iterations, a fast-closing gripper alone takes the first half of
     a step and fails in the second: it stops with the state from before the whole step (not the half step it
     took), as the adaptive path leaves it."""
-    scene = replace(task_scenes("planar", 1)[0], newton=NewtonSettings(max_iterations=3, max_step_halvings=1))
+    scene = replace(task_scenes("planar", 1, physics_dt=COARSE_STEP["planar"])[0],
+                    newton=NewtonSettings(max_iterations=3, max_step_halvings=1))
     sim = Simulator(scene)
     monkeypatch.setattr(sim, "_halve_pending", _uncalled)
     advanced, substeps = assert_same(sim, sim.initial_state(), 80, np.array([[-1.0] * 3]),
@@ -178,7 +184,7 @@ def test_a_gripper_that_fails_stops_and_the_others_run_on():
     """Without halvings and with four Newton iterations, two grippers bending fast fail part-way (at different
     steps), and a still one runs on; the advance stops each where the steps do."""
     scenes = [replace(scene, newton=NewtonSettings(max_iterations=4, max_step_halvings=0))
-              for scene in task_scenes("planar", 3)]
+              for scene in task_scenes("planar", 3, physics_dt=COARSE_STEP["planar"])]
     sim = Simulator(scenes)
     rate = np.array([[0.0] * 3, [-2.0] * 3, [-0.5] * 3])
     advanced, _ = assert_same(sim, sim.initial_state(), 80, rate,
