@@ -99,26 +99,42 @@ def table(results: dict[str, dict], chosen: str | None) -> str:
     return "\n".join(rows)
 
 
+def varying_label(key: str, keys: list[str]) -> str:
+    """``key`` with only the settings whose values differ among ``keys`` (all of it where none differ)."""
+    pairs = [dict(pair.split("=") for pair in other.split()) for other in keys]
+    varying = [name for name in pairs[0] if len({pair.get(name) for pair in pairs}) > 1]
+    own = dict(pair.split("=") for pair in key.split())
+    return " ".join(f"{name}={own[name]}" for name in varying) or key
+
+
 def plot(results: dict[str, dict], chosen: str | None, path: Path, title: str) -> None:
-    """Success against mean peak force, one point per setting, the choice ringed."""
+    """Success (with its 95 % Wilson interval) against mean peak force, one point per setting labelled by what
+    differs between them, the choice ringed."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from agents.compare import wilson_interval
+
     fig, ax = plt.subplots(figsize=(7.5, 5))
-    for key, result in results.items():
+    keys = list(results)
+    for k, (key, result) in enumerate(results.items()):
         x, y = result["mean_peak_contact_force_N"], result["success_rate"]
-        ax.plot(x, y, "o", color="C1" if key == chosen else "C0")
-        ax.annotate(key, (x, y), fontsize=7, xytext=(4, 3), textcoords="offset points")
+        low, high = wilson_interval(sum(result["successes"]), len(result["successes"]))
+        ax.errorbar(x, y, yerr=[[y - low], [high - y]], fmt="o", color="C1" if key == chosen else "C0", capsize=3,
+                    lw=0.8)
+        ax.annotate(varying_label(key, keys), (x, y), fontsize=8, xytext=(5, 4 if k % 2 == 0 else -11),
+                    textcoords="offset points")  # alternately above and below: neighbours' labels overlap less
     if chosen is not None:
         ax.plot(results[chosen]["mean_peak_contact_force_N"], results[chosen]["success_rate"], "o", ms=14,
                 mfc="none", color="C1", label=f"chosen: {chosen}")
-        ax.legend(loc="lower right", fontsize=8)
+        ax.legend(loc="best", fontsize=8)
     ax.set_xlabel("mean peak finger force [N]")
-    ax.set_ylabel("success rate")
-    ax.set_title(title, fontsize=9)
+    ax.set_ylabel("success rate (95 % interval)")
+    ax.set_title(title, fontsize=9, wrap=True)
     ax.grid(alpha=0.3)
+    ax.margins(x=0.25)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
@@ -195,8 +211,8 @@ def main(argv: list[str] | None = None) -> dict:
     print(table(shown, chosen))
     print(f"chosen: {chosen}" if chosen else f"no setting presses less than --max-force {args.max_force} N")
     if args.plot:
-        plot(shown, chosen, args.plot, f"reactive controller, {args.model}, seeds {args.seed}–"
-                                       f"{args.seed + args.episodes - 1}, reflexes "
+        plot(shown, chosen, args.plot, f"The reactive controller's settings, {args.model} model, seeds {args.seed}–"
+                                       f"{args.seed + args.episodes - 1}\nwith the reflexes "
                                        + ", ".join(f"{name} {task_settings[name]}" for name in REFLEXES))
         print(f"wrote {args.plot}")
     return {"chosen": chosen, "results": shown}
