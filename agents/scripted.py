@@ -56,18 +56,19 @@ class RandomPolicy:
 
 
 TUNED_3D_GAINS = {"grip": 0.3, "gust_grip": 0.3, "gain": 0.1}
-"""The reactive controller's gains tuned again in the 3-D model at Δt 2.5 ms (the default step then) with four
-friction passes and the PPO policies' closing reflexes, on tuning seeds 5000–5199 only (16 settings of ``grip``,
-``gust_grip`` and ``gain``; docs/notes/ppo_experiments.md): success 0.885 at a mean peak force of 1.66 N there,
-against 0.835 at 1.96 N with the defaults. ``agents.evaluate --policy reactive_tuned`` runs it: the fair baseline for
-a policy trained in 3-D."""
+"""The reactive controller's gains tuned in the 3-D model with four friction passes and the PPO policies' closing
+reflexes, on tuning seeds 5000–5199 only: chosen at Δt 2.5 ms from 16 settings of ``grip``, ``gust_grip`` and
+``gain`` (docs/notes/ppo_experiments.md), and chosen again at today's 1.25 ms from six (``python -m
+agents.tune_controller``, docs/training.md): success 0.900 at a mean peak force of 1.69 N there. ``agents.evaluate
+--policy reactive_tuned`` runs it: the fair baseline for a policy trained in 3-D."""
 
 GRADED_3D_GAINS = {"grip": 0.2, "gust_grip": 0.2, "gain": 0.1, "touch_force": 0.1}
-"""The reactive controller with a graded touch (``touch_force`` [N]), its settings chosen in the 3-D model at Δt
-2.5 ms (the default step then) with the PPO policies' closing reflexes, on tuning seeds 5000–5199 only (seven
-settings of ``touch_force``, ``grip`` and ``gust_grip``; docs/notes/ppo_experiments.md), as the most successful whose
-mean peak force is below the on–off controller's (:data:`TUNED_3D_GAINS`): success 0.935 at 1.59 N there, against
-0.885 at 1.66 N. ``agents.evaluate --policy reactive_graded`` runs it: the strongest scripted baseline in 3-D."""
+"""The reactive controller with a graded touch (``touch_force`` [N]), its settings chosen in the 3-D model with the
+PPO policies' closing reflexes, on tuning seeds 5000–5199 only, as the most successful whose mean peak force is
+below the on–off controller's (:data:`TUNED_3D_GAINS`): at Δt 2.5 ms from seven settings of ``touch_force``, ``grip``
+and ``gust_grip`` (docs/notes/ppo_experiments.md), and again at today's 1.25 ms from four of ``grip`` and
+``gust_grip`` (docs/training.md): success 0.910 at 1.68 N there, against the on–off controller's 0.900 at 1.69 N.
+``agents.evaluate --policy reactive_graded`` runs it: the strongest scripted baseline in 3-D."""
 
 
 def gust_window(task: GraspTask) -> tuple[float, float]:

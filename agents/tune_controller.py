@@ -107,9 +107,9 @@ def varying_label(key: str, keys: list[str]) -> str:
     return " ".join(f"{name}={own[name]}" for name in varying) or key
 
 
-def plot(results: dict[str, dict], chosen: str | None, path: Path, title: str) -> None:
+def plot(results: dict[str, dict], chosen: str | None, path: Path, title: str, max_force: float | None = None) -> None:
     """Success (with its 95 % Wilson interval) against mean peak force, one point per setting labelled by what
-    differs between them, the choice ringed."""
+    differs between them, the choice ringed, and the force bound [N] of the choice (if any) as a dashed line."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -126,9 +126,12 @@ def plot(results: dict[str, dict], chosen: str | None, path: Path, title: str) -
                     lw=0.8)
         ax.annotate(varying_label(key, keys), (x, y), fontsize=8, xytext=(5, 4 if k % 2 == 0 else -11),
                     textcoords="offset points")  # alternately above and below: neighbours' labels overlap less
+    if max_force is not None:
+        ax.axvline(max_force, color="0.4", ls="--", lw=1, label=f"choice among settings below {max_force:g} N")
     if chosen is not None:
         ax.plot(results[chosen]["mean_peak_contact_force_N"], results[chosen]["success_rate"], "o", ms=14,
                 mfc="none", color="C1", label=f"chosen: {chosen}")
+    if chosen is not None or max_force is not None:
         ax.legend(loc="best", fontsize=8)
     ax.set_xlabel("mean peak finger force [N]")
     ax.set_ylabel("success rate (95 % interval)")
@@ -211,9 +214,10 @@ def main(argv: list[str] | None = None) -> dict:
     print(table(shown, chosen))
     print(f"chosen: {chosen}" if chosen else f"no setting presses less than --max-force {args.max_force} N")
     if args.plot:
-        plot(shown, chosen, args.plot, f"The reactive controller's settings, {args.model} model, seeds {args.seed}–"
-                                       f"{args.seed + args.episodes - 1}\nwith the reflexes "
-                                       + ", ".join(f"{name} {task_settings[name]}" for name in REFLEXES))
+        title = (f"The reactive controller's settings, {args.model} model, seeds {args.seed}–"
+                 f"{args.seed + args.episodes - 1}\nwith the reflexes "
+                 + ", ".join(f"{name} {task_settings[name]}" for name in REFLEXES))
+        plot(shown, chosen, args.plot, title, args.max_force)
         print(f"wrote {args.plot}")
     return {"chosen": chosen, "results": shown}
 
