@@ -16,6 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
+BASELINE_COLOURS = ("tab:olive", "tab:cyan", "tab:brown", "tab:pink")
+"""The ``--baseline`` lines' colours, apart from the runs' (C0, C1, ...)."""
+
 
 def load_run(run_dir: Path) -> dict:
     """A train_ppo folder's curve (training episodes and validations) and, where written, its held-out
@@ -68,7 +71,8 @@ def plot_learning_curves(runs: list[dict], path: Path, baselines: dict[str, dict
                 ax.axhline(np.mean(rates), ls=style, color="0.25", lw=1.4, label=f"{name} controller (held-out)")
     for k, (label, result) in enumerate((baselines or {}).items()):
         for ax in axes:
-            ax.axhline(result["success_rate"], ls=(0, (5, 1 + 2 * k)), color=f"C{8 + k % 2}", lw=1.8,
+            colour = BASELINE_COLOURS[k % len(BASELINE_COLOURS)]
+            ax.axhline(result["success_rate"], ls=(0, (5, 1 + 2 * k)), color=colour, lw=1.8,
                        label=f"{label} ({result['episodes']} seeds from {result['first_seed']:,})")
     finals = [run["evaluation"]["ppo"]["success_rate"] for run in runs if "ppo" in run["evaluation"]]
     if finals:
@@ -78,8 +82,10 @@ def plot_learning_curves(runs: list[dict], path: Path, baselines: dict[str, dict
     axes[0].set_xlabel("environment steps")
     axes[1].set_xlabel("training wall time [min] (validations left out)")
     axes[0].set_ylabel("success rate (deterministic policy)")
-    for ax in axes:
-        ax.set_ylim(-0.02, 1.02)
+    lowest = min([np.min(line.get_ydata()) for ax in axes for line in ax.get_lines() if len(line.get_ydata())],
+                 default=0.0)
+    for ax in axes:  # the whole range, unless every line is high: then from a little below the lowest
+        ax.set_ylim(-0.02 if lowest < 0.5 else np.floor(10 * lowest - 0.5) / 10, 1.02)
         ax.grid(True, alpha=0.3)
     if axes[0].get_legend_handles_labels()[0]:
         axes[0].legend(fontsize=7, loc="lower right")
