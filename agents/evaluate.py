@@ -1,12 +1,14 @@
 """Evaluate a policy on SoftGripperUnderwater-v0 over fixed seeds: success rate, mean return, peak finger force,
 and how the episodes ended.
 
-    python -m agents.evaluate --policy random|ramp|reactive|reactive_tuned|reactive_graded|pretrained|PATH
+    python -m agents.evaluate
+        --policy random|ramp|reactive|reactive_tuned|reactive_graded|pretrained|pretrained_planar|PATH
         [--episodes 200] [--seed 1000] [--json FILE] [--model planar|3d]
 
 Episodes use seeds seed, seed + 1, ...: every policy sees the same specimens, currents and gusts, so their numbers
 compare directly. PATH is a folder that ``agents.train_ppo`` wrote (its model and VecNormalize statistics);
-``pretrained`` is the policy shipped in ``agents/pretrained/``. The episodes run batched, ``--num-envs`` at a time,
+``pretrained`` is the policy shipped in ``agents/pretrained/`` (trained in 3-D), ``pretrained_planar`` the one
+trained in the planar model (``agents/pretrained_planar/``). The episodes run batched, ``--num-envs`` at a time,
 each exactly as a single env with its seed would run it.
 """
 
@@ -27,7 +29,10 @@ from soft_gripper_env.env import SoftGripperUnderwaterVectorEnv, observation_bou
 from soft_gripper_env.grasp_task import GraspTask, RewardWeights
 
 PRETRAINED = Path(__file__).resolve().parent / "pretrained"
-"""The shipped PPO policy: its model and VecNormalize statistics."""
+"""The shipped PPO policy (trained in the default 3-D model): its model, VecNormalize statistics and config."""
+SHIPPED = {"pretrained": PRETRAINED, "pretrained_planar": PRETRAINED.with_name("pretrained_planar")}
+"""The trained policies shipped with the package, by the name ``--policy`` gives them: the default one, and the one
+trained in the planar model before it."""
 ENDINGS = ("success", "harmed", "lost", "solver_failure", "not_all_touching", "off_grasp_point", "moving",
            "not_held_through_gust")
 """How an episode can end, in the order :func:`episode_ending` tests them."""
@@ -225,13 +230,13 @@ SCRIPTED = ("random", "ramp", "reactive", "reactive_tuned", "reactive_graded")
 
 
 def policy_folder(name: str) -> Path:
-    """The folder of a trained policy that ``--policy`` names: ``pretrained`` (the shipped one) or a path."""
-    return PRETRAINED if name == "pretrained" else Path(name)
+    """The folder of a trained policy that ``--policy`` names: one of :data:`SHIPPED` or a path."""
+    return SHIPPED.get(name, Path(name))
 
 
 def make_policy(name: str, task: GraspTask, seed: int) -> Callable[[np.ndarray], np.ndarray]:
     """``random`` (seeded by ``seed``), ``ramp``, ``reactive``, ``reactive_tuned`` (:data:`TUNED_3D_GAINS`),
-    ``reactive_graded`` (:data:`GRADED_3D_GAINS`), ``pretrained`` or the path of a trained policy."""
+    ``reactive_graded`` (:data:`GRADED_3D_GAINS`), one of :data:`SHIPPED` or the path of a trained policy."""
     if name == "random":
         return RandomPolicy(task, seed)
     if name == "ramp":
@@ -301,7 +306,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--policy", required=True,
                         help="random, ramp, reactive, reactive_tuned (its gains tuned in 3-D), reactive_graded (with "
-                             "a graded touch, tuned in 3-D), pretrained, or a train_ppo folder")
+                             "a graded touch, tuned in 3-D), pretrained (trained in 3-D), pretrained_planar, or a "
+                             "train_ppo folder")
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--seed", type=int, default=1000, help="the first episode's seed")
     parser.add_argument("--json", type=Path, help="write the results here")
@@ -314,8 +320,8 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--episodes = {args.episodes} must be at least 1")
     if args.num_envs < 1:
         parser.error(f"--num-envs = {args.num_envs} must be at least 1")
-    if args.policy not in (*SCRIPTED, "pretrained") and not Path(args.policy).is_dir():
-        parser.error(f"--policy = {args.policy!r} is not {', '.join((*SCRIPTED, 'pretrained'))} or a folder")
+    if args.policy not in (*SCRIPTED, *SHIPPED) and not Path(args.policy).is_dir():
+        parser.error(f"--policy = {args.policy!r} is not {', '.join((*SCRIPTED, *SHIPPED))} or a folder")
     reflexes = reflex_settings(args)
     trained = {} if args.policy in SCRIPTED else \
         trained_task(policy_folder(args.policy))

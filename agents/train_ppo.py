@@ -35,12 +35,12 @@ config.json records the controller, so ``agents.evaluate --policy DIR`` runs the
 [LOW, HIGH] m instead of the task's whole range (:class:`RadiusOversampling`): most failed grasps are of the smallest
 spheres. Validation and evaluation draw as the task does.
 
-``--init-from POLICY`` starts from a trained policy (``pretrained`` or a train_ppo folder) instead of a fresh
-network: its weights, its optimiser's state and its VecNormalize statistics, which go on adapting. It fine-tunes,
-for example, the planar-trained shipped policy in the 3-D model; the policy must observe what this run observes and
-correct the same controller (or none), and its network is kept. ``--pressure-onset C`` moves the load at which the
-reward's pressure warning starts (``GraspTask.pressure_onset``, 0.7 by default) for the training episodes only:
-validation and evaluation report the task's own reward.
+``--init-from POLICY`` starts from a trained policy (``pretrained``, ``pretrained_planar`` or a train_ppo folder)
+instead of a fresh network: its weights, its optimiser's state and its VecNormalize statistics, which go on
+adapting. It fine-tunes, for example, the planar-trained policy in the 3-D model; the policy must observe what this
+run observes and correct the same controller (or none), and its network is kept. ``--pressure-onset C`` moves the
+load at which the reward's pressure warning starts (``GraspTask.pressure_onset``, 0.7 by default) for the training
+episodes only: validation and evaluation report the task's own reward.
 """
 
 from __future__ import annotations
@@ -369,8 +369,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "[LOW, HIGH] m, within the task's range (default: every episode draws from the task's "
                              "range; validation and evaluation always do)")
     parser.add_argument("--init-from", default=None, metavar="POLICY",
-                        help="start from this trained policy (pretrained or a train_ppo folder): its weights, "
-                             "optimiser state and observation statistics (default: a fresh network)")
+                        help="start from this trained policy (pretrained, pretrained_planar or a train_ppo folder): "
+                             "its weights, optimiser state and observation statistics (default: a fresh network)")
     parser.add_argument("--pressure-onset", type=float, default=None, metavar="C",
                         help="the load (peak force / fragility limit) at which the training reward's pressure warning"
                              f" starts, in [0, 1) (GraspTask.pressure_onset; default {GraspTask().pressure_onset:g})")

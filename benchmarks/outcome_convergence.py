@@ -2,7 +2,7 @@
 floor that no step size removes.
 
     python -m benchmarks.outcome_convergence [--models 3d,planar]
-        [--controllers reactive,ramp,pretrained[,reactive_graded]] [--dts 3d=0.01,...;planar=...]
+        [--controllers reactive,ramp,pretrained[,reactive_graded,pretrained_planar]] [--dts 3d=0.01,...;planar=...]
         [--tolerance-floor] [--episodes 400] [--seed 3000000] [--workers 2] [--stop-after MINUTES]
         [--runs out/outcome_convergence_runs] [--json out/outcome_convergence.json]
         [--plot out/outcome_convergence.png] [--time]
@@ -50,7 +50,7 @@ from agents.compare import wilson_interval
 from ._timing import save_plot
 
 MODELS = ("3d", "planar")
-CONTROLLERS = ("reactive", "ramp", "pretrained", "reactive_graded")
+CONTROLLERS = ("reactive", "ramp", "pretrained", "reactive_graded", "pretrained_planar")
 """The controllers a study may run (``agents.evaluate``'s names); the first three by default."""
 DEFAULT_CONTROLLERS = CONTROLLERS[:3]
 DEFAULT_DTS = {"3d": (0.01, 0.005, 0.0025, 0.00125, 0.000625, 0.0003125),
@@ -77,7 +77,7 @@ SIGNIFICANCE = 0.05
 """A test passes where its p-value is above this."""
 FLOOR_MARGIN = 0.02
 """A Δt's label agreement with the finest Δt may fall this far (2 points) below the chaos floor."""
-CODE = ("soft_gripper_env", "agents/scripted.py", "agents/evaluate.py", "agents/pretrained")
+CODE = ("soft_gripper_env", "agents/scripted.py", "agents/evaluate.py", "agents/pretrained", "agents/pretrained_planar")
 """What a piece's outcomes depend on, fingerprinted (:func:`code_fingerprint`): a kept piece is taken only if none
 of it has changed since. The GPU back end's own module is left out: the study runs on the CPU, which never runs
 it."""
@@ -144,7 +144,7 @@ def task_settings(piece: Piece) -> dict:
     reflexes (its config.json)."""
     from dataclasses import replace
 
-    from agents.evaluate import PRETRAINED, REFLEXES, trained_task
+    from agents.evaluate import REFLEXES, SHIPPED, trained_task
     from soft_gripper_env.grasp_task import GraspTask
 
     changes = changes_of(piece.variant)
@@ -156,8 +156,8 @@ def task_settings(piece: Piece) -> dict:
         settings["newton"] = replace(GraspTask(model=piece.model).newton, relative_tolerance=1e-6)
     if "friction settled" in changes:
         settings["friction_passes"] = None
-    if piece.controller == "pretrained":
-        trained = trained_task(PRETRAINED)
+    if piece.controller in SHIPPED:
+        trained = trained_task(SHIPPED[piece.controller])
         settings.update({name: trained.get(name) for name in REFLEXES}, observation=trained.get("observation", "full"))
     return settings
 
@@ -530,7 +530,7 @@ def plot(summary: dict, path: Path) -> None:
 
     models = [m for m in summary["models"] if summary["models"][m]]
     fig, axes = plt.subplots(len(models), 3, figsize=(15, 4.2 * len(models)), squeeze=False)
-    colours = dict(zip(CONTROLLERS, ("tab:blue", "tab:orange", "tab:green", "tab:red"), strict=True))
+    colours = dict(zip(CONTROLLERS, ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple"), strict=True))
     for row, model in enumerate(models):
         success, agree, gap = axes[row]
         for controller, study in summary["models"][model].items():

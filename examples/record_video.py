@@ -1,8 +1,8 @@
 """Record a video of one grasp episode under water: the paper's scripted ramp, the reactive controller, or the
 shipped PPO policy.
 
-    python -m examples.record_video --out out/video [--policy ramp|reactive|pretrained] [--seed 0] [--model 3d|planar]
-        [--gif] [--frame-at 2.5]
+    python -m examples.record_video --out out/video [--policy ramp|reactive|pretrained|pretrained_planar] [--seed 0]
+        [--model 3d|planar] [--gif] [--frame-at 2.5]
 
 Writes DIR/<policy>-episode-0.mp4 (moviepy, as Gymnasium's RecordVideo does); with ``--gif`` also a smaller GIF
 (half size, every second frame) for a web page, and with ``--frame-at SECONDS`` a PNG of that moment of the episode.
@@ -22,7 +22,7 @@ import soft_gripper_env
 from agents.evaluate import REFLEXES, make_policy
 from soft_gripper_env.grasp_task import GraspTask
 
-POLICIES = ("ramp", "reactive", "pretrained")
+POLICIES = ("ramp", "reactive", "pretrained", "pretrained_planar")
 
 
 def write_gif(frames: list[np.ndarray], path: Path, fps: float, every: int = 2, scale: float = 0.5) -> None:

@@ -195,15 +195,16 @@ def test_a_run_started_from_a_trained_policy_starts_from_its_weights_and_statist
     from stable_baselines3 import PPO
 
     from agents import train_ppo
-    from agents.evaluate import PRETRAINED
+    from agents.evaluate import SHIPPED
 
-    shipped = PPO.load(PRETRAINED / "ppo_model.zip", device="cpu")
-    shipped_statistics = pickle.loads((PRETRAINED / "vecnormalize.pkl").read_bytes())
+    planar = SHIPPED["pretrained_planar"]  # a policy of its own, no correction
+    shipped = PPO.load(planar / "ppo_model.zip", device="cpu")
+    shipped_statistics = pickle.loads((planar / "vecnormalize.pkl").read_bytes())
     with monkeypatch.context() as patch:
         patch.setattr(PPO, "learn", lambda self, *args, **kwargs: self)  # no rollout, no update
         patch.setattr(train_ppo.ProgressAndCurve, "training_wall", lambda self: 0.0)  # its clock never started
-        train_ppo.main(["--out", str(tmp_path / "untrained"), "--init-from", "pretrained", "--timesteps", "256",
-                        "--num-envs", "2", "--num-threads", "1", "--model", "planar", "--eval-episodes", "0",
+        train_ppo.main(["--out", str(tmp_path / "untrained"), "--init-from", "pretrained_planar", "--timesteps",
+                        "256", "--num-envs", "2", "--num-threads", "1", "--model", "planar", "--eval-episodes", "0",
                         "--validate-every", "0", "--checkpoint-every", "0"])
     started = PPO.load(tmp_path / "untrained" / "ppo_model.zip", device="cpu")
     for name, value in shipped.policy.state_dict().items():
@@ -214,7 +215,7 @@ def test_a_run_started_from_a_trained_policy_starts_from_its_weights_and_statist
     np.testing.assert_array_equal(statistics.obs_rms.mean, shipped_statistics.obs_rms.mean)
     assert statistics.ret_rms.var == shipped_statistics.ret_rms.var
 
-    train_ppo.main(["--out", str(tmp_path / "tuned"), "--init-from", str(PRETRAINED), "--timesteps", "256",
+    train_ppo.main(["--out", str(tmp_path / "tuned"), "--init-from", str(planar), "--timesteps", "256",
                     "--num-envs", "2", "--num-threads", "1", "--model", "planar", "--eval-episodes", "0",
                     "--validate-every", "0", "--checkpoint-every", "0", "--pressure-onset", "0.5"])
     statistics = pickle.loads((tmp_path / "tuned" / "vecnormalize.pkl").read_bytes())
@@ -222,8 +223,8 @@ def test_a_run_started_from_a_trained_policy_starts_from_its_weights_and_statist
     tuned = PPO.load(tmp_path / "tuned" / "ppo_model.zip", device="cpu").policy.state_dict()
     assert not all(torch.equal(value, tuned[name]) for name, value in shipped.policy.state_dict().items())
     config = json.loads((tmp_path / "tuned" / "config.json").read_text())
-    shipped_config = json.loads((PRETRAINED / "config.json").read_text())
-    assert config["init_from"] == {"policy": str(PRETRAINED), "model": "planar", "timesteps": 600_000,
+    shipped_config = json.loads((planar / "config.json").read_text())
+    assert config["init_from"] == {"policy": str(planar), "model": "planar", "timesteps": 600_000,
                                    "seed": shipped_config["seed"], "git_commit": shipped_config.get("git_commit"),
                                    "training_wall_s": shipped_config["training_wall_s"]}
     assert config["policy"] == shipped_config["policy"]
@@ -233,13 +234,13 @@ def test_a_run_started_from_a_trained_policy_starts_from_its_weights_and_statist
 def test_a_run_refuses_to_start_from_a_policy_that_reads_or_means_something_else(tmp_path, capsys):
     from agents.train_ppo import main
 
-    for extra, message in ((["--observation", "full"], "--init-from pretrained: it observes 'sensors', this run "
-                                                       "'full' (--observation)"),
-                           (["--residual-to", "reactive_tuned"], "--init-from pretrained: it corrects None, this "
-                                                                 "run {'base': 'reactive_tuned'"),
+    for extra, message in ((["--observation", "full"], "--init-from pretrained_planar: it observes 'sensors', this "
+                                                       "run 'full' (--observation)"),
+                           (["--residual-to", "reactive_tuned"], "--init-from pretrained_planar: it corrects None, "
+                                                                 "this run {'base': 'reactive_tuned'"),
                            (["--pressure-onset", "1"], "--pressure-onset = 1 is outside [0, 1)")):
         with pytest.raises(SystemExit):
-            main(["--out", str(tmp_path / "refused"), "--init-from", "pretrained", *extra])
+            main(["--out", str(tmp_path / "refused"), "--init-from", "pretrained_planar", *extra])
         assert message in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["--out", str(tmp_path / "refused"), "--init-from", str(tmp_path)])
@@ -268,19 +269,27 @@ def test_the_pressure_warning_ramp_sets_each_rollouts_weight():
     assert env.venv.task.reward.pressure == 4.0 and env.venv.task.reward.hold == GraspTask().reward.hold
 
 
-@pytest.mark.parametrize("model", ["planar", "3d"])
-def test_the_shipped_policy_loads_and_beats_random(model):
-    """agents/pretrained holds a PPO policy (model, statistics and config) trained on the sensors' observation: it
-    acts in both rod models and, on 8 seeds no training or tuning saw, succeeds where random actions do not."""
-    from agents.evaluate import PRETRAINED, REFLEXES, evaluate, make_policy
+@pytest.mark.parametrize("name, model", [("pretrained", "3d"), ("pretrained", "planar"),
+                                         ("pretrained_planar", "planar")])
+def test_the_shipped_policies_load_and_beat_random(name, model):
+    """agents/pretrained holds a PPO policy (model, statistics and config) trained in the env's default model, with
+    the package version and commit it was trained at; agents/pretrained_planar one trained planar. Both observe the
+    sensors, so act in both rod models, and on 8 seeds no training or tuning saw succeed where random actions do
+    not."""
+    from agents.evaluate import REFLEXES, SHIPPED, evaluate, make_policy, run_config
 
-    assert {"ppo_model.zip", "vecnormalize.pkl", "config.json"} <= {path.name for path in PRETRAINED.iterdir()}
-    assert sum(path.stat().st_size for path in PRETRAINED.iterdir()) < 2_000_000  # small enough to ship
+    folder = SHIPPED[name]
+    assert {"ppo_model.zip", "vecnormalize.pkl", "config.json"} <= {path.name for path in folder.iterdir()}
+    assert sum(path.stat().st_size for path in folder.iterdir()) < 2_000_000  # small enough to ship
+    config = run_config(folder)
+    assert config["model"] == (GraspTask().model if name == "pretrained" else "planar")
+    if name == "pretrained":
+        assert config["package_version"] and re.fullmatch(r"[0-9a-f]{40}", config["git_commit"])
     task = GraspTask(model=model, observation="sensors")
-    pretrained = make_policy("pretrained", task, 0)
-    assert pretrained.observation == "sensors"
-    reflexes = {name: pretrained.trained_task.get(name) for name in REFLEXES}  # the reflexes it was trained with
-    trained = evaluate(pretrained, 8, 40_000, progress=False, num_envs=8, model=model, observation="sensors",
+    policy = make_policy(name, task, 0)
+    assert policy.observation == "sensors"
+    reflexes = {name: policy.trained_task.get(name) for name in REFLEXES}  # the reflexes it was trained with
+    trained = evaluate(policy, 8, 40_000, progress=False, num_envs=8, model=model, observation="sensors",
                        **reflexes)
     random = evaluate(RandomPolicy(task, 0), 8, 40_000, progress=False, num_envs=8, model=model,
                       observation="sensors")
@@ -649,5 +658,5 @@ def test_the_reactive_controller_with_a_graded_touch_is_a_named_policy():
 def test_evaluate_refuses_an_unknown_policy_naming_the_ones_it_knows():
     out = run_script("-m", "agents.evaluate", "--policy", "no_such_policy", "--episodes", "1")
     assert out.returncode == 2
-    assert ("'no_such_policy' is not random, ramp, reactive, reactive_tuned, reactive_graded, pretrained or a "
-            "folder") in out.stderr
+    assert ("'no_such_policy' is not random, ramp, reactive, reactive_tuned, reactive_graded, pretrained, "
+            "pretrained_planar or a folder") in out.stderr
