@@ -252,6 +252,11 @@ def make_policy(name: str, task: GraspTask, seed: int) -> Callable[[np.ndarray],
 
 REFLEXES = ("touching_closing_rate", "approach_slowing_gap")
 """The task's closing reflexes that the command lines set (each an option named after it)."""
+TRAINING_REFLEXES = {"touching_closing_rate": 0.15, "approach_slowing_gap": 0.01}
+"""The closing reflexes the policies train with (``--touching-closing-rate``, ``--approach-slowing-gap``): a
+touching finger closes at most at 0.15 1/s, and within 1 cm of the specimen a finger's fastest closing falls
+linearly from 0.3 1/s to that bound. With them, and the warning grown to 12, PPO holds more gently than the
+reactive controller and more often (docs/training.md); the fair baselines get them too."""
 
 
 def bound_or_none(text: str) -> float | None:

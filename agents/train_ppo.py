@@ -62,6 +62,7 @@ from tqdm import tqdm
 
 import soft_gripper_env
 from agents.evaluate import (
+    TRAINING_REFLEXES,
     add_reflexes,
     evaluate,
     load_ppo,
@@ -96,11 +97,6 @@ settings and seeds, 200 held-out seeds) a ramp to 4 made the policies both gentl
 of 3 from the start kept two seeds of three from learning to close; heavier final weights trade success for
 force along one line, and with the closing reflexes 12 is the weight whose three seeds meet the goals
 (docs/training.md; docs/notes/ppo_experiments.md)."""
-TRAINING_REFLEXES = {"touching_closing_rate": 0.15, "approach_slowing_gap": 0.01}
-"""The closing reflexes the policies train with (``--touching-closing-rate``, ``--approach-slowing-gap``): a
-touching finger closes at most at 0.15 1/s, and within 1 cm of the specimen a finger's fastest closing falls
-linearly from 0.3 1/s to that bound. With them, and the warning grown to 12, PPO holds more gently than the
-reactive controller and more often (docs/training.md)."""
 POLICY_SETTINGS = {"net_arch": [128, 128], "log_std_init": 0.0}
 """MlpPolicy's network and initial action spread (std 1, SB3's default). Narrower starts keep more of a good
 policy's holds (the reactive controller with per-step noise of std 0.2 keeps 50 % of its success, with 0.37 only

@@ -25,14 +25,20 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from agents.evaluate import REFLEXES, add_reflexes, bound_or_none, evaluate, reflex_settings, task_from_arguments
+from agents.evaluate import (
+    REFLEXES,
+    TRAINING_REFLEXES,
+    add_reflexes,
+    bound_or_none,
+    evaluate,
+    reflex_settings,
+    task_from_arguments,
+)
 from agents.scripted import ReactivePolicy
 from soft_gripper_env.grasp_task import GraspTask
 
 TUNING_SEED = 5000
 """The first of the tuning seeds (5,000–5,199): settings are chosen on them, and nothing is reported on them."""
-POLICY_REFLEXES = {"touching_closing_rate": 0.15, "approach_slowing_gap": 0.01}
-"""The closing reflexes of the trained policies (``agents.train_ppo``'s defaults), which a fair baseline gets too."""
 SETTINGS = tuple(name for name in inspect.signature(ReactivePolicy).parameters if name != "task")
 """What ``--grid`` may name: :class:`~agents.scripted.ReactivePolicy`'s settings."""
 REPORTED = ("success_rate", "mean_peak_contact_force_N", "mean_return", "endings", "successes",
@@ -156,7 +162,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--max-force", type=float, default=None, metavar="N",
                         help="choose among settings whose mean peak finger force is below this [N]")
     parser.add_argument("--workers", type=int, default=2, help="settings evaluated at a time, one process each")
-    add_reflexes(parser, defaults=POLICY_REFLEXES)
+    add_reflexes(parser, defaults=TRAINING_REFLEXES)
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes = {args.episodes} must be at least 1")
