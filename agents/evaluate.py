@@ -156,12 +156,21 @@ def load_ppo(model_dir: Path) -> Callable[[np.ndarray], np.ndarray]:
         from agents.residual import ResidualAction, residual_policy
 
         task = GraspTask(**{name: act.trained_task[name] for name in ("model", "observation", *REFLEXES)})
-        act = residual_policy(act, ResidualAction(task, make_policy(residual["base"], task, 0), residual["rate"],
+        act = residual_policy(act, ResidualAction(task, residual_base(residual, task), residual["rate"],
                                                   gust_hold=residual.get("gust_hold", False),
                                                   press_limit=residual.get("press_limit"),
                                                   close_untouched=residual.get("close_untouched", False),
                                                   press_taper=residual.get("press_taper")))
     return act
+
+
+def residual_base(residual: dict, task: GraspTask) -> ReactivePolicy:
+    """The controller that a correction's config.json (its ``residual``) corrects, in ``task``: built from the
+    settings the run recorded (``base_settings``), so that a later change of the named preset's gains cannot
+    change what a trained correction does; a config without them (written before they were recorded) names only
+    the preset, which is built as it is today."""
+    settings = residual.get("base_settings")
+    return make_policy(residual["base"], task, 0) if settings is None else ReactivePolicy(task, **settings)
 
 
 def run_config(model_dir: Path) -> dict:

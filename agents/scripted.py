@@ -132,6 +132,13 @@ class ReactivePolicy:
         self._forces, self._touching, self._limit = layout["finger_forces"], layout["touching"], layout["fragile_force"]
         self._gaps, self._fraction = layout["finger_gaps"], layout["episode_fraction"]
 
+    def settings(self) -> dict:
+        """Every setting of the constructor but the task, as keyword arguments that build this controller again:
+        what a correction trained on it records (``agents.train_ppo --residual-to``, key ``base_settings``)."""
+        return {"grip": self.grip, "gust_grip": self.gust_grip, "gain": self.gain, "press_rate": self._press,
+                "approach_rate": self._approach, "slow_gap": self.slow_gap, "slowest": self.slowest,
+                "touch_force": self.touch_force}
+
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         observation = np.asarray(observation)
         batch = observation.reshape(-1, observation.shape[-1]).astype(float)

@@ -429,7 +429,7 @@ def main(argv: list[str] | None = None) -> dict:
         combine = ResidualAction(task, make_policy(args.residual_to, task, args.seed), args.residual_rate,
                                  gust_hold=args.residual_gust_hold, press_limit=args.residual_press_limit,
                                  close_untouched=args.residual_close_untouched, press_taper=args.residual_press_taper)
-        residual = {"base": args.residual_to, **combine.settings()}
+        residual = {"base": args.residual_to, "base_settings": combine.base.settings(), **combine.settings()}
     policy_settings = RESIDUAL_POLICY_SETTINGS if residual else POLICY_SETTINGS
     start_from = None
     if args.init_from is not None:

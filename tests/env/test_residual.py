@@ -73,8 +73,11 @@ def test_a_residual_run_saves_its_controller_and_evaluates_as_the_two_together(t
                     "--residual-to", "reactive_tuned", "--residual-rate", "0.05", "--eval-episodes", "0",
                     "--validate-every", "0", "--checkpoint-every", "0"])
     config = json.loads((tmp_path / "config.json").read_text())
-    assert config["residual"] == {"base": "reactive_tuned", "rate": 0.05, "gust_hold": False, "press_limit": None,
-                                  "close_untouched": False, "press_taper": None}
+    recorded = ReactivePolicy(SENSORS, **TUNED_3D_GAINS).settings()
+    assert recorded["grip"] == TUNED_3D_GAINS["grip"] and recorded["touch_force"] is None
+    assert config["residual"] == {"base": "reactive_tuned", "base_settings": recorded, "rate": 0.05,
+                                  "gust_hold": False, "press_limit": None, "close_untouched": False,
+                                  "press_taper": None}
     assert config["policy"]["log_std_init"] == pytest.approx(np.log(0.2))
     policy = load_ppo(tmp_path)
     import pickle
@@ -88,6 +91,16 @@ def test_a_residual_run_saves_its_controller_and_evaluates_as_the_two_together(t
     controller = ReactivePolicy(SENSORS, **TUNED_3D_GAINS)
     wanted = ResidualAction(SENSORS, controller, 0.05)(obs, alone(obs))
     np.testing.assert_array_equal(policy(obs), wanted)
+
+    # the controller is rebuilt from the settings the run recorded, not from today's preset of that name
+    config["residual"]["base_settings"] = {**recorded, "grip": 0.5, "gust_grip": 0.6}
+    (tmp_path / "config.json").write_text(json.dumps(config))
+    other = ReactivePolicy(SENSORS, **{**TUNED_3D_GAINS, "grip": 0.5, "gust_grip": 0.6})
+    assert not np.array_equal(other(obs), controller(obs))
+    np.testing.assert_array_equal(load_ppo(tmp_path)(obs), ResidualAction(SENSORS, other, 0.05)(obs, alone(obs)))
+    del config["residual"]["base_settings"]  # a config from before the settings were recorded: the preset
+    (tmp_path / "config.json").write_text(json.dumps(config))
+    np.testing.assert_array_equal(load_ppo(tmp_path)(obs), wanted)
     assert policy.observation == "sensors" and policy.trained_task["model"] == "planar"
     assert not np.allclose(policy(obs), controller(obs), atol=1e-3)  # the residual is there
 
