@@ -19,10 +19,10 @@ from PIL import Image
 from tqdm import tqdm
 
 import soft_gripper_env
-from agents.evaluate import REFLEXES, make_policy
+from agents.evaluate import REFLEXES, SHIPPED, make_policy
 from soft_gripper_env.grasp_task import GraspTask
 
-POLICIES = ("ramp", "reactive", "pretrained", "pretrained_planar")
+POLICIES = ("ramp", "reactive", *SHIPPED)
 
 
 def write_gif(frames: list[np.ndarray], path: Path, fps: float, every: int = 2, scale: float = 0.5) -> None:
