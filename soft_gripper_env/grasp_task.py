@@ -48,16 +48,17 @@ class _ModelDefault:
 
 MODEL_DEFAULT = _ModelDefault()
 MODEL_DEFAULTS = {"3d": {"physics_dt": 0.00125, "friction_passes": 4},
-                  "planar": {"physics_dt": 0.00125, "friction_passes": 2}}
+                  "planar": {"physics_dt": 0.000625, "friction_passes": 2}}
 """Each rod model's default physics step [s] and cap on friction's re-solves (:class:`GraspTask`), at Newton's
-relative tolerance 1e-4: the largest step at which the grasp's outcomes are those of a step four (planar: two)
-times finer (``benchmarks/outcome_convergence.py``, ``docs/speed_vs_error.md``). On 400 seeds no controller was
+relative tolerance 1e-4: the largest step at which the grasp's outcomes are those of the finest step studied,
+0.3125 ms (``benchmarks/outcome_convergence.py``, ``docs/speed_vs_error.md``). On 400 seeds no controller was
 tuned on, the success rate, the endings, the peak finger force and the sphere's final place are the finest step's
 within sampling error, and per-seed success labels agree with it within 2 points of the chaos floor, under the
-graded controller (3-D and planar) and the shipped policy (3-D; planar it misses by one seed). The on–off reactive
-controller's statistics converge at every step too, its labels at none that was run. A longer step is faster and
-keeps the statistics (3-D at 2.5 ms: every test passes but the labels, 97.0 % against 98 % asked), so
-``physics_dt`` is the setting to trade: ``docs/speed_vs_error.md`` gives each step's errors and speed."""
+graded controller, the shipped policy, the policy trained planar and the ramp, in both models, and in 3-D under
+the on–off reactive controller too (planar it misses 0.625 ms by one seed of 400; its statistics converge at
+every step). A longer step is faster and keeps the statistics (3-D at 2.5 ms: every test passes but the labels,
+97.0 % against 98 % asked; planar at 1.25 ms the policies' labels miss by two seeds), so ``physics_dt`` is the
+setting to trade: ``docs/speed_vs_error.md`` gives each step's errors and speed."""
 OBSERVATIONS = ("full", "sensors")
 """What an observation holds: ``"full"``, the fingers' node states and per-node forces with the sensors' readings;
 ``"sensors"``, only what a real gripper measures or is told (the same size in both rod models)."""
@@ -118,7 +119,7 @@ class GraspTask:
     control_dt: float = 0.05
     """Time between actions [s]; a multiple of ``physics_dt``."""
     physics_dt: float = MODEL_DEFAULT
-    """Implicit physics step [s]. By default the rod model's (:data:`MODEL_DEFAULTS`: 1.25 ms in both),
+    """Implicit physics step [s]. By default the rod model's (:data:`MODEL_DEFAULTS`: 1.25 ms in 3-D, 0.625 ms planar),
     set at construction: ``dataclasses.replace(task, model=...)`` keeps the other model's."""
     newton: NewtonSettings = field(default_factory=lambda: NewtonSettings(relative_tolerance=1e-4))
     """Stopping rule of the Newton solve inside each physics step: relative tolerance 1e-4. The simulator's default,

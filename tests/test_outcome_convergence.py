@@ -287,3 +287,37 @@ def test_a_tolerance_floor_of_a_variant_at_that_tolerance_is_refused(capsys):
     with pytest.raises(SystemExit):
         study.main(["--change", "tolerance 1e-6", "--tolerance-floor"])
     assert "--tolerance-floor" in capsys.readouterr().err
+
+
+def test_a_run_whose_own_twin_disagrees_is_judged_against_its_own_lower_floor():
+    """A coarse run 8 points off the finest Δt fails where a 1 nm shift changes nothing at either step, and passes
+    where the shift flips 18 % of the coarse run's own labels: the bar is the lower of the two runs' floors."""
+    dts = {"3d": (0.002, 0.001)}
+    rng = np.random.default_rng(3)
+    labels = rng.random(400) < 0.8
+    finest = run_of(labels)
+
+    def flipped(start: int, count: int) -> dict:
+        """``count`` labels flipped from the ``start``-th of each kind on, half of them successes (the rate stays)."""
+        changed = labels.copy()
+        for value in (True, False):
+            which = np.flatnonzero(labels == value)[start:start + count // 2]
+            changed[which] = not value
+        return run_of(changed, peaks=finest["peak_forces_N"], offsets=finest["final_offsets_m"])
+
+    coarse = flipped(0, 32)
+    joined = {("3d", "reactive", 0.001, "base", "cpu"): finest, ("3d", "reactive", 0.001, "perturbed", "cpu"): finest,
+              ("3d", "reactive", 0.002, "base", "cpu"): coarse, ("3d", "reactive", 0.002, "perturbed", "cpu"): coarse}
+    steady = study.summarize(joined, ["3d"], ["reactive"], dts, 400, 0)["models"]["3d"]["reactive"]["dts"]["0.002"]
+    assert steady["against_reference"]["label_agreement"] == pytest.approx(0.92)
+    assert steady["against_reference"]["floor"] == 1.0 and not steady["against_reference"]["passes"]
+    joined[("3d", "reactive", 0.002, "perturbed", "cpu")] = flipped(40, 40)  # 328 of 400 alike
+    chaotic = study.summarize(joined, ["3d"], ["reactive"], dts, 400, 0)["models"]["3d"]["reactive"]["dts"]["0.002"]
+    assert chaotic["chaos_floor"]["label_agreement"] == pytest.approx(0.82)
+    assert chaotic["against_reference"]["floor"] == pytest.approx(0.82) and chaotic["against_reference"]["passes"]
+
+
+def test_verdict_floor_is_the_lower_of_the_two_and_the_reference_alone_without_a_twin():
+    assert study.verdict_floor(1.0, {"label_agreement": 0.97}) == 0.97
+    assert study.verdict_floor(0.95, {"label_agreement": 0.99}) == 0.95
+    assert study.verdict_floor(0.95, None) == 0.95 and study.verdict_floor(None, {"label_agreement": 0.9}) is None

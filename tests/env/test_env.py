@@ -334,13 +334,13 @@ def test_the_newton_setting_reaches_the_solver():
 
 
 def test_each_rod_model_takes_its_own_default_step_and_friction_passes():
-    """physics_dt and friction_passes default to the model's (MODEL_DEFAULTS: 1.25 ms in both, with four passes
-    in 3-D and two planar); given ones are kept, None included."""
+    """physics_dt and friction_passes default to the model's (MODEL_DEFAULTS: 1.25 ms with four passes in 3-D,
+    0.625 ms with two planar); given ones are kept, None included."""
     assert MODEL_DEFAULTS == {"3d": {"physics_dt": 0.00125, "friction_passes": 4},
-                              "planar": {"physics_dt": 0.00125, "friction_passes": 2}}
+                              "planar": {"physics_dt": 0.000625, "friction_passes": 2}}
     three_d, planar = GraspTask(), GraspTask(model="planar")
     assert (three_d.physics_dt, three_d.friction_passes, three_d.substeps) == (0.00125, 4, 40)
-    assert (planar.physics_dt, planar.friction_passes, planar.substeps) == (0.00125, 2, 40)
+    assert (planar.physics_dt, planar.friction_passes, planar.substeps) == (0.000625, 2, 80)
     given = GraspTask(model="planar", physics_dt=0.01, friction_passes=None)
     assert (given.physics_dt, given.friction_passes) == (0.01, None)
     assert GraspTask(friction_passes=1).friction_passes == 1
