@@ -89,9 +89,9 @@ def assert_same(sim, state, n_steps, rate, low=-1.5, high=0.2, running=None, clo
 
 @pytest.mark.parametrize("model", ["planar", "3d"])
 def test_advance_is_bitwise_the_steps_of_a_grasp(model):
-    """Four task grippers bent toward their spheres close at different rates through 60 steps (contact,
+    """Four task grippers bent toward their spheres close at different rates through 60 steps of 1.25 ms (contact,
     friction, the current); a fifth does not run and keeps its state."""
-    scenes = task_scenes(model, 5)
+    scenes = task_scenes(model, 5, physics_dt=0.00125)  # 75 ms: long enough to reach the spheres in either model
     sim = Simulator(scenes)
     state = sim.initial_state()
     rate = np.linspace(-0.5, -0.1, 15).reshape(5, 3)
