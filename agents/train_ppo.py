@@ -76,6 +76,8 @@ from agents.evaluate import (
 from agents.learning_curves import load_run, plot_learning_curves
 from agents.residual import RESIDUAL_BASES, ResidualAction, ResidualVecEnv, residual_policy
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
+from agents.scripted import ReactivePolicy
+from agents.tune_controller import parse_grid
 from soft_gripper_env.grasp_task import MODELS, GraspTask, RewardWeights
 
 HELD_OUT_SEED = 1_000_000
@@ -345,6 +347,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--residual-to", choices=RESIDUAL_BASES, default=None, metavar="CONTROLLER",
                         help="learn a correction to this scripted controller (" + ", ".join(RESIDUAL_BASES)
                              + "; default: none, PPO acts alone)")
+    parser.add_argument("--residual-base", nargs="+", default=None, metavar="NAME=VALUE",
+                        help="settings of the controller that replace its preset's, one value each, named as "
+                             "agents.tune_controller's --grid names them (e.g. grip=0.15 gust_grip=0.15; with "
+                             "--residual-to; config.json records the controller's settings)")
     parser.add_argument("--residual-rate", type=float, default=RESIDUAL_RATE, metavar="RATE",
                         help=f"the largest correction added to the controller's rate [1/s] (default {RESIDUAL_RATE:g};"
                              " with --residual-to)")
@@ -404,9 +410,10 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--residual-rate = {args.residual_rate} is outside (0, {task.max_curvature_rate:g}] 1/s (the "
                      f"fastest closing)")
     if not args.residual_to and (args.residual_gust_hold or args.residual_press_limit is not None
-                                 or args.residual_press_taper is not None or args.residual_close_untouched):
-        parser.error("--residual-gust-hold, --residual-press-limit, --residual-press-taper and "
-                     "--residual-close-untouched guard a correction: they need --residual-to")
+                                 or args.residual_press_taper is not None or args.residual_close_untouched
+                                 or args.residual_base is not None):
+        parser.error("--residual-base, --residual-gust-hold, --residual-press-limit, --residual-press-taper and "
+                     "--residual-close-untouched shape a correction: they need --residual-to")
     for option, fraction in (("--residual-press-limit", args.residual_press_limit),
                              ("--residual-press-taper", args.residual_press_taper)):
         if fraction is not None and not 0.0 < fraction <= 1.0:
@@ -426,7 +433,16 @@ def main(argv: list[str] | None = None) -> dict:
         training_settings["pressure_onset"] = args.pressure_onset
     residual, combine = None, None
     if args.residual_to:
-        combine = ResidualAction(task, make_policy(args.residual_to, task, args.seed), args.residual_rate,
+        base = make_policy(args.residual_to, task, args.seed)
+        if args.residual_base is not None:
+            try:
+                grid = parse_grid(args.residual_base, "--residual-base")
+                if any(len(values) != 1 for values in grid.values()):
+                    raise ValueError("--residual-base takes one value per setting")
+                base = ReactivePolicy(task, **{**base.settings(), **{name: values[0] for name, values in grid.items()}})
+            except ValueError as error:
+                parser.error(str(error))
+        combine = ResidualAction(task, base, args.residual_rate,
                                  gust_hold=args.residual_gust_hold, press_limit=args.residual_press_limit,
                                  close_untouched=args.residual_close_untouched, press_taper=args.residual_press_taper)
         residual = {"base": args.residual_to, "base_settings": combine.base.settings(), **combine.settings()}

@@ -46,23 +46,24 @@ REPORTED = ("success_rate", "mean_peak_contact_force_N", "mean_return", "endings
 """What the JSON keeps of each setting's evaluation (its per-episode lists for paired comparisons)."""
 
 
-def parse_grid(items: list[str]) -> dict[str, list[float | None]]:
-    """``NAME=V1,V2,...`` items as {name: values}; raises ValueError naming a bad name or value."""
+def parse_grid(items: list[str], option: str = "--grid") -> dict[str, list[float | None]]:
+    """``NAME=V1,V2,...`` items as {name: values}; raises ValueError naming ``option``, and the bad name or value."""
     grid: dict[str, list[float | None]] = {}
     for item in items:
         name, equals, values = item.partition("=")
         if not equals or not values:
-            raise ValueError(f"--grid item {item!r} is not NAME=V1,V2,...")
+            raise ValueError(f"{option} item {item!r} is not NAME=V1,V2,...")
         if name not in SETTINGS:
-            raise ValueError(f"--grid names {name!r}, not a setting of the reactive controller ({', '.join(SETTINGS)})")
+            raise ValueError(f"{option} names {name!r}, not a setting of the reactive controller "
+                             f"({', '.join(SETTINGS)})")
         if name in grid:
-            raise ValueError(f"--grid names {name!r} twice")
+            raise ValueError(f"{option} names {name!r} twice")
         try:
             grid[name] = [bound_or_none(value) for value in values.split(",")]
         except ValueError:
-            raise ValueError(f"--grid {name}: {values!r} holds a value that is not a number (or none)") from None
+            raise ValueError(f"{option} {name}: {values!r} holds a value that is not a number (or none)") from None
         if None in grid[name] and name != "touch_force":
-            raise ValueError(f"--grid {name}: none is a value of touch_force only (the on–off touch)")
+            raise ValueError(f"{option} {name}: none is a value of touch_force only (the on–off touch)")
     return grid
 
 

@@ -55,9 +55,9 @@ relative tolerance 1e-4: the largest step at which the grasp's outcomes are thos
 tuned on, the success rate, the endings, the peak finger force and the sphere's final place are the finest step's
 within sampling error, and per-seed success labels agree with it within 2 points of the chaos floor, under the
 graded controller, the shipped policy, the policy trained planar and the ramp, in both models, and in 3-D under
-the on–off reactive controller too (planar it misses 0.625 ms by one seed of 400; its statistics converge at
+the on–off reactive controller too (planar its labels converge at no step down to 0.3125 ms, its statistics at
 every step). A longer step is faster and keeps the statistics (3-D at 2.5 ms: every test passes but the labels,
-97.0 % against 98 % asked; planar at 1.25 ms the policies' labels miss by two seeds), so ``physics_dt`` is the
+97.0 % against 97.5 % asked; planar at 1.25 ms the policies' labels miss by two seeds), so ``physics_dt`` is the
 setting to trade: ``docs/speed_vs_error.md`` gives each step's errors and speed."""
 OBSERVATIONS = ("full", "sensors")
 """What an observation holds: ``"full"``, the fingers' node states and per-node forces with the sensors' readings;

@@ -7,7 +7,7 @@ import pytest
 
 from agents.residual import ResidualAction, ResidualVecEnv, residual_policy
 from agents.sb3_vec_env import SoftGripperSB3VecEnv
-from agents.scripted import TUNED_3D_GAINS, ReactivePolicy
+from agents.scripted import GRADED_3D_GAINS, TUNED_3D_GAINS, ReactivePolicy
 from soft_gripper_env.grasp_task import GraspTask
 
 SENSORS = GraspTask(observation="sensors", touching_closing_rate=0.15, approach_slowing_gap=0.01)
@@ -200,3 +200,20 @@ def test_the_untouched_guard_stops_a_correction_holding_back_a_finger_that_does_
     np.testing.assert_allclose(kept[untouched & (residual < 0)], unguarded[untouched & (residual < 0)], atol=1e-6)
     np.testing.assert_allclose(kept[~untouched], unguarded[~untouched], atol=1e-6)
     assert np.abs(unguarded[untouched & (residual > 0)]).max() > 0.01  # the guard is what removed it
+
+
+def test_a_residual_run_trains_on_the_controller_settings_given_and_refuses_bad_ones(tmp_path, capsys):
+    from agents import train_ppo
+
+    base = ["--out", str(tmp_path), "--timesteps", "128", "--num-envs", "4", "--model", "planar", "--eval-episodes",
+            "0", "--validate-every", "0", "--checkpoint-every", "0"]
+    train_ppo.main(base + ["--residual-to", "reactive_graded", "--residual-base", "grip=0.15", "gust_grip=0.12"])
+    recorded = json.loads((tmp_path / "config.json").read_text())["residual"]["base_settings"]
+    assert recorded == {**ReactivePolicy(SENSORS, **GRADED_3D_GAINS).settings(), "grip": 0.15, "gust_grip": 0.12}
+    for extra, named in ((["--residual-base", "grip=0.15"], "need --residual-to"),
+                         (["--residual-to", "reactive_graded", "--residual-base", "grasp=0.1"], "'grasp'"),
+                         (["--residual-to", "reactive_graded", "--residual-base", "grip=0.1,0.2"], "one value"),
+                         (["--residual-to", "reactive_graded", "--residual-base", "grip=1.5"], "grip")):
+        with pytest.raises(SystemExit):
+            train_ppo.main(base + extra)
+        assert named in capsys.readouterr().err
