@@ -19,6 +19,16 @@ def run_of(successes, endings=None, peaks=None, offsets=None):
             "final_offsets_m": (rng.normal(0.0, 0.01, (n, 3)) if offsets is None else np.asarray(offsets)).tolist()}
 
 
+def flipped_run(labels, like: dict, count: int, start: int = 0) -> dict:
+    """A run of ``labels`` with ``count`` of them flipped from the ``start``-th of each kind on, half of them successes
+    (so that the success rate stays), its peak forces and final places those of the run ``like``."""
+    changed = labels.copy()
+    for value in (True, False):
+        which = np.flatnonzero(labels == value)[start:start + count // 2]
+        changed[which] = not value
+    return run_of(changed, peaks=like["peak_forces_N"], offsets=like["final_offsets_m"])
+
+
 @pytest.mark.parametrize("a, b", [((40, 100), (55, 100)), ((380, 400), (350, 400)), ((7, 9), (7, 9))])
 def test_two_proportion_test_is_the_chi_square_test_of_the_two_by_two_table(a, b):
     table = [[a[0], a[1] - a[0]], [b[0], b[1] - b[0]]]
@@ -261,12 +271,7 @@ def test_a_tolerance_floor_runs_at_the_finest_step_only_and_the_verdict_takes_th
     labels = rng.random(400) < 0.8
 
     def flipped(count: int) -> dict:
-        """``count`` labels flipped, half of them successes, so that the success rate stays."""
-        changed = labels.copy()
-        for value in (True, False):
-            which = np.flatnonzero(labels == value)[:count // 2]
-            changed[which] = not value
-        return run_of(changed, peaks=finest["peak_forces_N"], offsets=finest["final_offsets_m"])
+        return flipped_run(labels, finest, count)
 
     finest = run_of(labels)
     joined = {("3d", "reactive", 0.001, "base", "cpu"): finest, ("3d", "reactive", 0.001, "perturbed", "cpu"): finest,
@@ -298,12 +303,7 @@ def test_a_run_whose_own_twin_disagrees_is_judged_against_its_own_lower_floor():
     finest = run_of(labels)
 
     def flipped(start: int, count: int) -> dict:
-        """``count`` labels flipped from the ``start``-th of each kind on, half of them successes (the rate stays)."""
-        changed = labels.copy()
-        for value in (True, False):
-            which = np.flatnonzero(labels == value)[start:start + count // 2]
-            changed[which] = not value
-        return run_of(changed, peaks=finest["peak_forces_N"], offsets=finest["final_offsets_m"])
+        return flipped_run(labels, finest, count, start)
 
     coarse = flipped(0, 32)
     joined = {("3d", "reactive", 0.001, "base", "cpu"): finest, ("3d", "reactive", 0.001, "perturbed", "cpu"): finest,
